@@ -1,0 +1,53 @@
+"""Progress reporting and cancellation, shared by every long-running stage."""
+
+import time
+
+from .constants import POLL_INTERVAL
+from .errors import BakeCancelled
+
+
+class Monitor:
+    """Carries a progress callback and a cancel check through a bake.
+
+    Parameters
+    ----------
+    progress : callable(fraction: float, message: str) or None
+        Called with the overall fraction done in [0, 1] and a short message.
+    cancel : callable() -> bool or None
+        Returning True asks the bake to stop; the next :meth:`update` raises
+        :class:`~core.errors.BakeCancelled`.
+
+    Stages call :meth:`update` after every chunk of work; chunks are sized so that this happens at
+    least every ``POLL_INTERVAL`` seconds. A stage owns a sub-range of [0, 1] set by :meth:`stage`.
+    """
+
+    def __init__(self, progress=None, cancel=None):
+        self._progress = progress
+        self._cancel = cancel
+        self._lo, self._hi = 0.0, 1.0
+        self._last_call = 0.0
+
+    def stage(self, lo, hi):
+        """Map the fractions of the next updates onto [lo, hi] of the whole bake."""
+        self._lo, self._hi = float(lo), float(hi)
+
+    def check(self):
+        """Raise BakeCancelled if the cancel check says so."""
+        if self._cancel is not None and self._cancel():
+            raise BakeCancelled("bake cancelled")
+
+    def update(self, fraction, message=""):
+        """Report progress within the current stage and honour a pending cancel."""
+        self.check()
+        if self._progress is not None:
+            f = self._lo + (self._hi - self._lo) * min(max(float(fraction), 0.0), 1.0)
+            self._progress(f, message)
+        self._last_call = time.perf_counter()
+
+    def due(self):
+        """True when a poll interval has passed since the last update."""
+        return time.perf_counter() - self._last_call >= POLL_INTERVAL
+
+
+#: A monitor that never reports and never cancels.
+SILENT = Monitor()
