@@ -123,7 +123,7 @@ def _as_index_array(name, value):
     if arr.size and not np.issubdtype(arr.dtype, np.integer):
         if not np.all(np.isfinite(arr)) or np.any(arr != np.round(arr)):
             bad = int(np.flatnonzero(~np.isfinite(arr) | (arr != np.round(arr)))[0])
-            raise SceneError(f"{name} must hold integers; got {arr[bad]!r} at index {bad}")
+            raise SceneError(f"{name} must hold integers; got {arr[bad].item()!r} at index {bad}")
     return _as_array(name, arr, np.int64, 1)
 
 
