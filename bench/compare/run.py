@@ -1,0 +1,324 @@
+"""The speed-against-accuracy sweep: our engine, Cycles and Radiance on the sample scenes.
+
+Run (Blender's Python environment, from the repository root)::
+
+    .venv/bin/python -m bench.compare.run                 # full sweep, every scene
+    .venv/bin/python -m bench.compare.run --quick         # CI-sized: small sweep, fewer samples
+    .venv/bin/python -m bench.compare.run --scenes office --cycles-samples 16 64 256
+
+Writes ``bench/results/<scene>.csv`` (one row per run) and ``bench/results/<scene>.png`` (error
+against wall time, log-log, one curve per method and one for Cycles, Pareto front marked), and
+``bench/results/<scene>_radiance.csv`` (illuminance at sensor points: ours, Cycles', Radiance's).
+
+Reference: the mean of two Cycles seeds at the largest sample count of the run (its own noise is
+estimated from the two seeds and written in the CSV as the ``reference`` row: the error of any run
+cannot be measured below it). Error: area-weighted relative RMS of per-face luminance (face = mean
+of its corners), emitters excluded, and the 95th percentile (bench/compare/metrics.py).
+"""
+
+import argparse
+import csv
+import time
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+
+from . import cycles, metrics, radiance
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENES = ("office", "apartment", "cornell_box")
+
+FIELDS = ["scene", "engine", "label", "method", "solver", "patch_size", "resolution", "samples", "seed",
+          "patches", "t_patches", "t_form_factors", "t_solve", "t_colours", "t_total",
+          "peak_mb", "rms", "p95", "bias", "faces"]
+
+
+def our_sweep(face_size, args):
+    """BakeSettings keyword sets of our engine's runs.
+
+    Patch sizes are given as multiples of the scene's face size (patches never exceed faces:
+    ``1`` = one patch per face). Every (patch size, resolution) runs the hemicube with the default
+    solver; the first patch size also runs 'hybrid' and 'exact' and every listed solver at R = 64.
+    """
+    sizes = [face_size * k for k in args.patch_sizes]
+    runs = []
+    for ps in sizes:
+        for R in args.resolutions:
+            runs.append(("hemicube, patch %.2f m" % ps,
+                         dict(patch_size=ps, method="hemicube", resolution=R)))
+    for method in args.methods:
+        runs.append((method, dict(patch_size=sizes[0], method=method, resolution=64)))
+    for solver in args.solvers:
+        runs.append(("hemicube R64, %s" % solver,
+                     dict(patch_size=sizes[0], method="hemicube", resolution=64, solver=solver)))
+    return runs
+
+
+def _face_size(arrays):
+    V = arrays["vertices"]
+    cv = arrays["corner_verts"]
+    nxt = np.arange(len(cv)) + 1
+    ends = arrays["face_starts"] + arrays["face_sizes"]
+    nxt[np.isin(nxt, ends)] = np.repeat(arrays["face_starts"], arrays["face_sizes"])[
+        np.isin(nxt, ends)]
+    return float(np.linalg.norm(V[cv[nxt]] - V[cv], axis=1).max())
+
+
+def sensor_points(arrays, count, rng):
+    """Floor and desk-top vertices with every face around them horizontal and facing up, away
+    from walls (>= 0.3 m from any vertical face vertex): (S,) vertex ids."""
+    V = arrays["vertices"]
+    cv = arrays["corner_verts"]
+    face = np.repeat(np.arange(len(arrays["face_starts"])), arrays["face_sizes"])
+    up_face = np.zeros(len(arrays["face_starts"]), bool)
+    Vf = V[cv]
+    # Newell normal z of each face from its corners.
+    nxt = np.arange(len(cv)) + 1
+    ends = arrays["face_starts"] + arrays["face_sizes"]
+    wrap = np.isin(nxt, ends)
+    nxt[wrap] = np.repeat(arrays["face_starts"], arrays["face_sizes"])[wrap]
+    cross_z = (Vf[:, 0] - Vf[nxt, 0]) * (Vf[:, 1] + Vf[nxt, 1])
+    nz = np.bincount(face, weights=cross_z, minlength=len(up_face))
+    emitting = np.any(arrays["emission"] > 0, axis=1)[arrays["face_materials"]]
+    up_face = (nz > 0) & ~emitting
+    ok_vertex = np.zeros(len(V), bool)
+    ok_vertex[cv[up_face[face]]] = True
+    ok_vertex[cv[~up_face[face]]] = False
+    ok_vertex &= V[:, 2] < 1.0
+    cand = np.flatnonzero(ok_vertex)
+    if len(cand) > count:
+        cand = np.sort(rng.choice(cand, count, replace=False))
+    return cand
+
+
+def vertex_values(arrays, corner_colours, vertices):
+    """Mean corner colour at each given vertex: (S, 3)."""
+    cv = arrays["corner_verts"]
+    sums = np.zeros((len(arrays["vertices"]), 3))
+    np.add.at(sums, cv, corner_colours)
+    cnt = np.bincount(cv, minlength=len(arrays["vertices"]))
+    return sums[vertices] / cnt[vertices, None]
+
+
+def run_scene(name, blend, args, rng):
+    from core.bake import BakeSettings, bake
+    from core.scene import make_scene
+
+    sc = cycles.load(blend)
+    arrays = cycles.extract(sc)
+    scene = make_scene(**arrays)
+    F = len(arrays["face_starts"])
+    emitter = np.any(arrays["emission"] > 0, axis=1)[arrays["face_materials"]]
+    keep = ~emitter & scene.face_valid
+    area = scene.face_areas
+    rows = []
+
+    def record(row, cc):
+        fv = metrics.face_values(cc, arrays["face_starts"], arrays["face_sizes"])
+        row.update(metrics.relative_errors(fv, ref_faces, area, keep) if ref_faces is not None
+                   else {})
+        row["scene"] = name
+        rows.append(row)
+        print("  %-8s %-12s %-8s R=%-4s ps=%-5s spp=%-5s t=%8.2fs rms=%s" % (
+            row["engine"], row.get("method", ""), row.get("solver", ""),
+            row.get("resolution", ""), row.get("patch_size", ""), row.get("samples", ""),
+            row["t_total"], "%.4f" % row["rms"] if "rms" in row else "-"), flush=True)
+
+    # Cycles: every sample count, two seeds; the reference is the mean of the top count's seeds.
+    samples = sorted(args.cycles_samples)
+    cyc = {}
+    for spp in samples:
+        for seed in (0, 1):
+            cc, sec = cycles.bake(sc, spp, seed=seed, threads=args.threads)
+            cyc[spp, seed] = (cc, sec)
+    top = samples[-1]
+    ref_cc = 0.5 * (cyc[top, 0][0] + cyc[top, 1][0])
+    ref_faces = metrics.face_values(ref_cc, arrays["face_starts"], arrays["face_sizes"])
+    # Noise of the reference: half the seed-to-seed difference (the mean of two seeds has 1/sqrt 2
+    # of one seed's noise; one seed's noise is the difference / sqrt 2).
+    fa = metrics.face_values(cyc[top, 0][0], arrays["face_starts"], arrays["face_sizes"])
+    fb = metrics.face_values(cyc[top, 1][0], arrays["face_starts"], arrays["face_sizes"])
+    noise = metrics.relative_errors(fa, fb, area, keep)
+    rows.append(dict(scene=name, engine="reference", method="cycles-2seeds", samples=top,
+                     t_total=cyc[top, 0][1] + cyc[top, 1][1], rms=noise["rms"] / 2,
+                     p95=noise["p95"] / 2, bias=0.0, faces=noise["faces"]))
+    print("  reference noise (2 seeds at %d spp): %.4f rms" % (top, noise["rms"] / 2))
+    for (spp, seed), (cc, sec) in sorted(cyc.items()):
+        record(dict(engine="cycles", method="path", samples=spp, seed=seed, t_total=sec,
+                    patches=F), cc)
+
+    face_size = _face_size(arrays) * (1 + 1e-6)
+    best = None
+    for label, kw in our_sweep(face_size, args):
+        settings = BakeSettings(**kw)
+        tracemalloc.start()
+        t0 = time.perf_counter()
+        res = bake(scene, settings)
+        wall = time.perf_counter() - t0
+        peak = tracemalloc.get_traced_memory()[1] / 2 ** 20
+        tracemalloc.stop()
+        tm = res.report["timings"]
+        row = dict(engine="ours", label=label, method=kw["method"], solver=res.report["solver"],
+                   patch_size=kw["patch_size"], resolution=kw.get("resolution", ""),
+                   patches=res.report["patches"], t_patches=tm.get("patches"),
+                   t_form_factors=tm.get("form_factors"), t_solve=tm.get("solve"),
+                   t_colours=tm.get("colours"), t_total=wall, peak_mb=peak)
+        record(row, res.corner_colours)
+        if best is None or row["rms"] < best[0]["rms"]:
+            best = (row, res.corner_colours)
+
+    # Radiance: illuminance at floor / desk-top sensor points.
+    sensors = sensor_points(arrays, args.sensors, rng)
+    normals = np.tile([0.0, 0.0, 1.0], (len(sensors), 1))
+    params = list(radiance.ACCURATE)
+    if args.quick:
+        params[params.index("-ad") + 1] = "2048"
+    E_rad, t_rad = radiance.irradiance(arrays, arrays["vertices"][sensors], normals,
+                                       params=params, nproc=args.threads)
+    face_of_corner = np.repeat(np.arange(F), arrays["face_sizes"])
+    rho_v = np.zeros((len(arrays["vertices"]), 3))
+    rho_v[arrays["corner_verts"]] = arrays["reflectance"][arrays["face_materials"][face_of_corner]]
+    rho_s = rho_v[sensors]
+    E_ours = np.pi * vertex_values(arrays, best[1], sensors) / rho_s
+    E_cyc = np.pi * vertex_values(arrays, ref_cc, sensors) / rho_s
+    lum = metrics.luminance
+    with open(Path(args.out) / ("%s_radiance.csv" % name), "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["x", "y", "z", "E_radiance", "E_ours", "E_cycles"])
+        for k, v in enumerate(sensors):
+            w.writerow(["%.3f" % c for c in arrays["vertices"][v]]
+                       + ["%.5f" % lum(x[k:k + 1])[0] for x in (E_rad, E_ours, E_cyc)])
+    ratio_ours = lum(E_ours) / lum(E_rad) - 1
+    ratio_cyc = lum(E_cyc) / lum(E_rad) - 1
+    rad_row = dict(scene=name, engine="radiance", method="rtrace -I", samples=len(sensors),
+                   t_total=t_rad, rms=float(np.sqrt(np.mean(ratio_ours ** 2))),
+                   bias=float(np.mean(ratio_ours)),
+                   p95=float(np.percentile(np.abs(ratio_ours), 95)), faces=len(sensors))
+    rows.append(rad_row)
+    rows.append(dict(scene=name, engine="radiance-vs-cycles", method="rtrace -I",
+                     samples=len(sensors), t_total=t_rad,
+                     rms=float(np.sqrt(np.mean(ratio_cyc ** 2))), bias=float(np.mean(ratio_cyc)),
+                     p95=float(np.percentile(np.abs(ratio_cyc), 95)), faces=len(sensors)))
+    print("  Radiance (%d sensors, %.0f s): ours %+.2f %% mean, %.2f %% rms; Cycles ref %+.2f %% "
+          "mean, %.2f %% rms" % (len(sensors), t_rad, 100 * np.mean(ratio_ours),
+                                 100 * np.sqrt(np.mean(ratio_ours ** 2)),
+                                 100 * np.mean(ratio_cyc), 100 * np.sqrt(np.mean(ratio_cyc ** 2))))
+    return rows
+
+
+def write_csv(rows, path):
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=FIELDS, extrasaction="ignore")
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: ("%.6g" % v if isinstance(v, float) else v)
+                        for k, v in r.items() if k in FIELDS})
+
+
+def chart(rows, path, title):
+    """Error vs wall time, log-log: a curve per method (ours) and Cycles; Pareto front marked."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    runs = [r for r in rows if r["engine"] in ("ours", "cycles") and r.get("rms", 0) > 0]
+    fig, ax = plt.subplots(figsize=(7.5, 5.2))
+    groups = {}
+    for r in runs:
+        key = "Cycles (seed %d)" % r["seed"] if r["engine"] == "cycles" else r["label"]
+        groups.setdefault(key, []).append(r)
+    for key, rs in sorted(groups.items()):
+        rs = sorted(rs, key=lambda r: r["t_total"])
+        style = "o-" if "Cycles" in key else "s--" if key.startswith("hemicube, ") else "D"
+        ax.plot([r["t_total"] for r in rs], [100 * r["rms"] for r in rs], style, label=key, ms=5)
+        for r in rs:
+            tag = ("%d spp" % r["samples"]) if r["engine"] == "cycles" else (
+                "R%s" % r["resolution"] if r["label"].startswith("hemicube, ") else "")
+            if "seed 1" not in key:
+                ax.annotate(tag, (r["t_total"], 100 * r["rms"]), fontsize=6,
+                            xytext=(3, 3), textcoords="offset points")
+    t = np.array([r["t_total"] for r in runs])
+    e = np.array([r["rms"] for r in runs])
+    front = metrics.pareto_front(t, e)
+    ax.plot(t[front], 100 * e[front], "-", color="k", lw=2.5, alpha=0.25, label="Pareto front")
+    ref = [r for r in rows if r["engine"] == "reference"]
+    if ref:
+        ax.axhline(100 * ref[0]["rms"], color="grey", ls=":", label="reference noise")
+    for level in (5, 2):
+        ax.axhline(level, color="r", lw=0.6, ls="-.")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("wall time (s, 2 cores)")
+    ax.set_ylabel("area-weighted relative RMS error (%)")
+    ax.set_title(title)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def summary(rows):
+    """At 5 % and 2 %: least time of ours and of Cycles (seed 0 and 1 pooled) and the speed-up."""
+    out = {}
+    ours = [r for r in rows if r["engine"] == "ours"]
+    cyc = [r for r in rows if r["engine"] == "cycles"]
+    for level in (0.05, 0.02):
+        to = metrics.time_to_reach([r["t_total"] for r in ours], [r["rms"] for r in ours], level)
+        tc = metrics.time_to_reach([r["t_total"] for r in cyc], [r["rms"] for r in cyc], level)
+        out[level] = (to, tc, tc / to if np.isfinite(to) and np.isfinite(tc) else float("nan"))
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description="Speed against accuracy: ours, Cycles, Radiance.")
+    ap.add_argument("--scenes", nargs="+", default=["office", "apartment"], choices=SCENES)
+    ap.add_argument("--blend-dir", default=str(ROOT / "sample_blends"),
+                    help="folder of <scene>.blend files")
+    ap.add_argument("--quick", action="store_true", help="CI-sized sweep (minutes)")
+    ap.add_argument("--cycles-samples", nargs="+", type=int, default=None)
+    ap.add_argument("--resolutions", nargs="+", type=int, default=None)
+    ap.add_argument("--patch-sizes", nargs="+", type=float, default=None,
+                    help="patch sizes as multiples of the face size (1 = one patch per face)")
+    ap.add_argument("--methods", nargs="*", default=None, help="besides hemicube: exact, hybrid")
+    ap.add_argument("--solvers", nargs="*", default=None,
+                    help="solvers to run at R = 64 besides 'auto'")
+    ap.add_argument("--sensors", type=int, default=40, help="Radiance sensor points per scene")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--out", default=str(ROOT / "bench" / "results"))
+    ap.add_argument("--seed", type=int, default=0, help="seed of the sensor choice")
+    args = ap.parse_args(argv)
+    if args.cycles_samples is None:
+        args.cycles_samples = [16, 64, 256] if args.quick else [16, 64, 256, 1024, 4096]
+    full = not args.quick
+    if args.resolutions is None:
+        args.resolutions = [32, 64, 128, 256] if full else [32, 64]
+    if args.patch_sizes is None:
+        args.patch_sizes = [1.0, 0.5] if full else [1.0]
+    if args.methods is None:
+        args.methods = ["hybrid", "exact"] if full else []
+    if args.solvers is None:
+        args.solvers = ["jacobi", "gauss_seidel", "progressive"] if full else []
+    if any(s < 1 for s in args.cycles_samples):
+        ap.error("--cycles-samples must be >= 1")
+    Path(args.out).mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(args.seed)
+    t_start = time.perf_counter()
+    for name in args.scenes:
+        blend = Path(args.blend_dir) / ("%s.blend" % name)
+        if not blend.exists():
+            print("%s: %s missing (run scripts/make_%s.py); skipped" % (name, blend, name))
+            continue
+        print("%s:" % name, flush=True)
+        rows = run_scene(name, blend, args, rng)
+        write_csv(rows, Path(args.out) / ("%s.csv" % name))
+        chart(rows, Path(args.out) / ("%s.png" % name), "%s: error against wall time" % name)
+        for level, (to, tc, x) in summary(rows).items():
+            print("  at %.0f %%: ours %.1f s, Cycles %.1f s, speed-up %.1fx"
+                  % (100 * level, to, tc, x))
+    print("total %.0f s" % (time.perf_counter() - t_start))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,676 @@
+"""The bake pipeline: scene -> patches -> active nodes and form factors -> solve -> corner colours.
+
+Nodes are two-sided (docs/design.md): patch p has a front node p and a back node p + P. Only the
+nodes that light can reach are solved: discovery starts from the emitting nodes and adds, wave by
+wave, every node that an active node's form-factor row hits. With ``two_sided=False`` back nodes
+never become active: whatever reaches them is absorbed (black), and they neither emit nor reflect.
+
+The rows computed during discovery are exactly the rows of the active nodes, so they are kept
+(compact: per batch, only the columns it hit) and assembled into the dense matrix of the active
+nodes. If they outgrow ``memory_budget`` the bake switches to matrix-free progressive refinement
+over all nodes, rows computed on demand (the rows already computed serve as a cache), and the
+report says so.
+
+Energy balance (report ``energy``, watts summed over RGB; power = pi x radiance x area):
+
+* ``emitted``  = pi sum_i A_i Le_i over the solved nodes;
+* ``absorbed`` = pi sum_i A_i (1 - rho_i) H_i with ``H_i = sum_j F_ij L_j`` the incident
+  radiance-equivalent of node i (``pi A_i H_i`` is the power arriving at i), plus the power that
+  lands on black back nodes (``two_sided=False``), ``pi sum_i A_i L_i F_ij`` over black j;
+* ``escaped``  = pi sum_i A_i L_i (1 - sum_j F_ij): the part of every row that hits nothing;
+* ``balance``  = emitted - absorbed - escaped. It is zero up to the solver residual when the form
+  factors are reciprocal (``A_i F_ij = A_j F_ji``); a hemicube's reciprocity error shows here too.
+  (Matrix-free progressive: the shooting bookkeeping, where balance = the unshot power.)
+"""
+
+import dataclasses
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .constants import (DEFAULT_CREASE_ANGLE, DEFAULT_MAX_ITERATIONS, DEFAULT_MEMORY_BUDGET,
+                        DEFAULT_TOLERANCE, POLL_INTERVAL)
+from .errors import SettingsError
+from .progress import Monitor
+from .solvers import (solve_direct, solve_gauss_seidel, solve_jacobi, solve_progressive)
+
+METHODS = ("hemicube", "exact", "hybrid")
+SOLVERS = ("auto", "direct", "jacobi", "gauss_seidel", "progressive")
+
+#: 'auto' solves directly (LU) up to this many active nodes: about 0.3 s per factorisation and
+#: 72 MB of float64 matrix at 3000 nodes on the reference machine, and faster than iterating.
+AUTO_DIRECT_MAX_NODES = 3000
+
+#: Form-factor batches are sized for this much work, so that progress and cancel are polled
+#: well within POLL_INTERVAL-scale gaps (the first batch is a single source).
+BATCH_SECONDS = 0.15
+
+#: A batch never holds more than this many float64 row entries (S x 2P): 64 MB.
+MAX_BATCH_ENTRIES = 8_000_000
+
+#: Cap on sources per form-factor batch, and growth factor between consecutive batches.
+MAX_BATCH_SOURCES = 1024
+BATCH_GROWTH = 4
+
+#: Progressive shooters per step are capped here (and by the measured batch speed).
+MAX_SHOOT_BATCH = 64
+
+#: A face is reported as lit from behind when its back side receives more than this times the
+#: power its front side receives (1: "more light on the back").
+BACKLIGHT_RATIO = 1.0
+
+#: Stage boundaries of the overall progress fraction.
+_STAGES = dict(patches=(0.0, 0.05), form_factors=(0.05, 0.75), solve=(0.75, 0.97),
+               colours=(0.97, 1.0))
+
+
+# ----------------------------------------------------------------------------- settings
+
+
+def _is_int(value):
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
+def _is_real(value):
+    return isinstance(value, (int, float, np.integer, np.floating)) and \
+        not isinstance(value, (bool, np.bool_)) and np.isfinite(value)
+
+
+@dataclass(frozen=True)
+class BakeSettings:
+    """Settings of a bake. Validated on construction (``SettingsError`` names the setting).
+
+    Attributes
+    ----------
+    patch_size : float
+        Largest patch edge in scene metres (> 0).
+    method : str
+        Form factors: ``'hemicube'``, ``'exact'`` (contour formula x ray-traced visibility) or
+        ``'hybrid'`` (hemicube with near pairs done exactly).
+    resolution : int
+        Hemicube resolution R (pixels across the top face), even, 4 to 4096.
+    rotate_hemicube : bool
+        Random rotation of each hemicube about its normal (breaks up aliasing; drawn from
+        ``seed``).
+    solver : str
+        ``'auto'``, ``'direct'``, ``'jacobi'``, ``'gauss_seidel'`` or ``'progressive'``.
+    tolerance : float
+        Relative residual at which iterative solvers stop, in (0, 1).
+    max_iterations : int
+        Sweep cap of Jacobi / Gauss-Seidel (progressive: shots capped at 50 x nodes), >= 1.
+    two_sided : bool
+        Both sides of every polygon are surfaces (Cycles' behaviour). False: back sides absorb.
+    crease_angle : float
+        Degrees in [0, 180]; corner colours average patches within it.
+    memory_budget : int
+        Bytes allowed for kept form factors (>= 1 MiB).
+    seed : int
+        Seed of every random choice (hemicube rotations, rays), >= 0.
+    rays : int
+        Visibility rays per patch pair of the 'exact' and 'hybrid' methods, >= 1.
+    """
+
+    patch_size: float = 0.5
+    method: str = "hemicube"
+    resolution: int = 64
+    rotate_hemicube: bool = True
+    solver: str = "auto"
+    tolerance: float = DEFAULT_TOLERANCE
+    max_iterations: int = DEFAULT_MAX_ITERATIONS
+    two_sided: bool = True
+    crease_angle: float = DEFAULT_CREASE_ANGLE
+    memory_budget: int = DEFAULT_MEMORY_BUDGET
+    seed: int = 0
+    rays: int = 16
+
+    def __post_init__(self):
+        def bad(name, allowed):
+            raise SettingsError(f"{name} must be {allowed}; got {getattr(self, name)!r}")
+
+        if not _is_real(self.patch_size) or self.patch_size <= 0:
+            bad("patch_size", "a finite number > 0 (metres)")
+        if self.method not in METHODS:
+            bad("method", "one of " + ", ".join(repr(m) for m in METHODS))
+        if not _is_int(self.resolution) or not 4 <= self.resolution <= 4096 \
+                or self.resolution % 2:
+            bad("resolution", "an even integer in [4, 4096]")
+        if not isinstance(self.rotate_hemicube, (bool, np.bool_)):
+            bad("rotate_hemicube", "True or False")
+        if self.solver not in SOLVERS:
+            bad("solver", "one of " + ", ".join(repr(s) for s in SOLVERS))
+        if not _is_real(self.tolerance) or not 0 < self.tolerance < 1:
+            bad("tolerance", "a number in (0, 1)")
+        if not _is_int(self.max_iterations) or self.max_iterations < 1:
+            bad("max_iterations", "an integer >= 1")
+        if not isinstance(self.two_sided, (bool, np.bool_)):
+            bad("two_sided", "True or False")
+        if not _is_real(self.crease_angle) or not 0 <= self.crease_angle <= 180:
+            bad("crease_angle", "a number of degrees in [0, 180]")
+        if not _is_int(self.memory_budget) or self.memory_budget < (1 << 20):
+            bad("memory_budget", "an integer number of bytes >= 1048576 (1 MiB)")
+        if not _is_int(self.seed) or self.seed < 0:
+            bad("seed", "an integer >= 0")
+        if not _is_int(self.rays) or self.rays < 1:
+            bad("rays", "an integer >= 1")
+
+
+@dataclass
+class BakeResult:
+    """Outcome of :func:`bake` / :func:`relight`.
+
+    Attributes
+    ----------
+    corner_colours : (C, 3) float64
+        Outgoing radiance per scene corner (front side, emission included).
+    patch_radiance : (P, 3) float64
+        Front-node radiance of every patch.
+    node_radiance : (2P, 3) float64
+        Radiance of every node (front p, back p + P); zero for nodes never reached.
+    patches : core.patches.Patches
+    report : dict
+        See docs/design.md (keys ``patches``, ``nodes_active``, ``faces_dropped``, ``method``,
+        ``solver``, ``iterations``, ``residual``, ``converged``, ``timings``, ``energy``,
+        ``form_factor_bytes``, ``warnings``).
+    """
+
+    corner_colours: np.ndarray
+    patch_radiance: np.ndarray
+    node_radiance: np.ndarray
+    patches: object
+    report: dict
+    _state: object = field(default=None, repr=False)
+
+
+# ----------------------------------------------------------------------------- form factor rows
+
+
+def _row_function(patches, method, resolution, rotate, rng, rays):
+    """Return rows(sources (S,) int64) -> (S, 2P) float64 for the chosen method."""
+    if method == "hemicube":
+        from .hemicube import hemicube_rows
+
+        def rows(sources):
+            return hemicube_rows(patches, sources, resolution=resolution, rotate=rotate, rng=rng)
+        return rows
+    from .patches import patch_triangles
+    from .raycast import build_bvh
+    bvh = build_bvh(patch_triangles(patches)[0])
+    if method == "exact":
+        from .exact import exact_rows
+
+        def rows(sources):
+            return exact_rows(patches, sources, rays=rays, rng=rng, bvh=bvh)
+        return rows
+    if method == "hybrid":
+        from .exact import hybrid_rows
+
+        def rows(sources):
+            return hybrid_rows(patches, sources, resolution=resolution, rays=rays, rng=rng,
+                               bvh=bvh)
+        return rows
+    raise SettingsError(f"method must be one of {METHODS}; got {method!r}")
+
+
+class _Batcher:
+    """Sizes batches of sources so that each takes about BATCH_SECONDS."""
+
+    def __init__(self, n_nodes):
+        self.size = 1
+        self.cap = max(1, min(MAX_BATCH_SOURCES, MAX_BATCH_ENTRIES // max(n_nodes, 1)))
+
+    def timed(self, fn, sources):
+        t0 = time.perf_counter()
+        out = fn(sources)
+        dt = time.perf_counter() - t0
+        rate = len(sources) / max(dt, 1e-6)
+        want = int(rate * BATCH_SECONDS)
+        self.size = int(np.clip(want, 1, min(self.cap, self.size * BATCH_GROWTH)))
+        return out
+
+
+def form_factor_matrix(patches, *, method="hemicube", resolution=64, rotate=False, rng=None,
+                       rays=16, monitor=None):
+    """Dense form factors between all 2P nodes (tests and small scenes).
+
+    Parameters
+    ----------
+    patches : core.patches.Patches
+    method : {'hemicube', 'exact', 'hybrid'}
+    resolution : int
+        Hemicube resolution.
+    rotate : bool
+        Random hemicube rotations (from ``rng``).
+    rng : numpy.random.Generator, optional
+        Default: ``np.random.default_rng(0)``.
+    rays : int
+        Visibility rays per pair ('exact', 'hybrid').
+    monitor : core.progress.Monitor, optional
+
+    Returns
+    -------
+    (2P, 2P) float64
+        Row i: fraction of the energy leaving node i that reaches each node.
+    """
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}; got {method!r}")
+    if rng is None:
+        rng = np.random.default_rng(0)
+    elif not isinstance(rng, np.random.Generator):
+        raise TypeError(f"rng must be a numpy.random.Generator; got {type(rng).__name__}")
+    monitor = Monitor() if monitor is None else monitor
+    n = 2 * len(patches.areas)
+    fn = _row_function(patches, method, resolution, rotate, rng, rays)
+    out = np.zeros((n, n))
+    batcher = _Batcher(n)
+    done = 0
+    while done < n:
+        sources = np.arange(done, min(done + batcher.size, n), dtype=np.int64)
+        out[sources] = batcher.timed(fn, sources)
+        done = sources[-1] + 1
+        monitor.update(done / n, "form factors")
+    return out
+
+
+class _RowStore:
+    """Rows computed so far, compact: per batch, its sources, the columns it hit and the values.
+
+    Immutable in use: :meth:`extended` returns a new store sharing the old batches.
+    """
+
+    def __init__(self, n_nodes):
+        self.n_nodes = n_nodes
+        self.batches = []                          # (sources (S,), cols (K,), vals (S, K) f32)
+        self.row_sums = np.full(n_nodes, np.nan)   # full row sum of every computed row
+        self.where = np.full((n_nodes, 2), -1, dtype=np.int64)   # (batch, row) of each node
+        self.nbytes = 0
+
+    def copy(self):
+        new = _RowStore(self.n_nodes)
+        new.batches = list(self.batches)
+        new.row_sums = self.row_sums.copy()
+        new.where = self.where.copy()
+        new.nbytes = self.nbytes
+        return new
+
+    def add(self, sources, rows):
+        hit = np.flatnonzero(np.any(rows > 0, axis=0))
+        vals = rows[:, hit].astype(np.float32)
+        b = len(self.batches)
+        self.batches.append((sources, hit, vals))
+        self.row_sums[sources] = rows.sum(axis=1)
+        self.where[sources, 0] = b
+        self.where[sources, 1] = np.arange(len(sources))
+        self.nbytes += vals.nbytes + hit.nbytes + sources.nbytes
+        return hit
+
+    def has(self, nodes):
+        return self.where[nodes, 0] >= 0
+
+    def rows(self, nodes):
+        """Dense (len(nodes), n_nodes) float64 rows of stored nodes."""
+        out = np.zeros((len(nodes), self.n_nodes))
+        bs = self.where[nodes, 0]
+        for b in np.unique(bs):
+            sel = np.flatnonzero(bs == b)
+            _, cols, vals = self.batches[b]
+            out[np.ix_(sel, cols)] = vals[self.where[nodes[sel], 1]]
+        return out
+
+    def assemble(self, row_nodes, col_nodes, dtype):
+        """Dense block F[row_nodes][:, col_nodes] from the stored rows (all must be stored)."""
+        pos_r = np.full(self.n_nodes, -1, dtype=np.int64)
+        pos_r[row_nodes] = np.arange(len(row_nodes))
+        pos_c = np.full(self.n_nodes, -1, dtype=np.int64)
+        pos_c[col_nodes] = np.arange(len(col_nodes))
+        out = np.zeros((len(row_nodes), len(col_nodes)), dtype=dtype)
+        for sources, cols, vals in self.batches:
+            r = pos_r[sources]
+            rk = r >= 0
+            c = pos_c[cols]
+            ck = c >= 0
+            if rk.any() and ck.any():
+                out[np.ix_(r[rk], c[ck])] = vals[np.ix_(rk, ck)]
+        return out
+
+
+def _discover(store, rows_fn, allowed, start_active, frontier, monitor, budget, batcher):
+    """Grow the active set wave by wave from ``frontier``; rows of new active nodes are stored.
+
+    Returns (active (2P,) bool, overflow bool). ``overflow``: the store outgrew ``budget``
+    and discovery stopped early.
+    """
+    active = start_active.copy()
+    active[frontier] = True
+    pending = list(np.sort(frontier))
+    pending = np.asarray(pending, dtype=np.int64)
+    best = 0.0
+    while len(pending):
+        pos = 0
+        next_wave = np.zeros(store.n_nodes, dtype=bool)
+        while pos < len(pending):
+            sources = pending[pos:pos + batcher.size]
+            rows = batcher.timed(rows_fn, sources)
+            hit = store.add(sources, rows)
+            pos += len(sources)
+            new = hit[allowed[hit] & ~active[hit]]
+            active[new] = True
+            next_wave[new] = True
+            done = int(np.count_nonzero(store.where[:, 0] >= 0))
+            left = len(pending) - pos + int(np.count_nonzero(next_wave))
+            best = max(best, done / (done + left))
+            monitor.update(best, f"form factors: {done} nodes")
+            if store.nbytes > budget:
+                return active, True
+        pending = np.flatnonzero(next_wave)
+    return active, False
+
+
+# ----------------------------------------------------------------------------- bake
+
+
+def _node_arrays(scene, patches, two_sided):
+    """Per-node reflectance, emission (2P, 3), areas (2P,) and the nodes allowed to be active."""
+    P = len(patches.areas)
+    rho = np.asarray(scene.reflectance, dtype=np.float64)[patches.material]
+    le = np.asarray(scene.emission, dtype=np.float64)[patches.material]
+    if two_sided:
+        rho_n = np.concatenate([rho, rho])
+        le_n = np.concatenate([le, le])
+    else:
+        rho_n = np.concatenate([rho, np.zeros_like(rho)])
+        le_n = np.concatenate([le, np.zeros_like(le)])
+    areas = np.concatenate([patches.areas, patches.areas]).astype(np.float64)
+    allowed = np.ones(2 * P, dtype=bool)
+    if not two_sided:
+        allowed[P:] = False
+    return rho_n, le_n, areas, allowed
+
+
+class _State:
+    """What relight needs: the scene, settings, patches and the kept rows."""
+
+    def __init__(self, scene, settings, patches, store, active, matrix_free):
+        self.scene = scene
+        self.settings = settings
+        self.patches = patches
+        self.store = store
+        self.active = active
+        self.matrix_free = matrix_free
+
+
+def bake(scene, settings=None, *, progress=None, cancel=None):
+    """Bake radiosity into corner colours.
+
+    Parameters
+    ----------
+    scene : core.scene.Scene
+    settings : BakeSettings, optional
+        Default ``BakeSettings()``.
+    progress : callable(fraction: float, message: str), optional
+        Overall fraction in [0, 1], non-decreasing.
+    cancel : callable() -> bool, optional
+        Polled at least every ``POLL_INTERVAL`` seconds of work; True raises
+        :class:`~core.errors.BakeCancelled` and nothing is returned.
+
+    Returns
+    -------
+    BakeResult
+    """
+    from .patches import make_patches
+
+    settings = BakeSettings() if settings is None else settings
+    if not isinstance(settings, BakeSettings):
+        raise TypeError(f"settings must be a BakeSettings; got {type(settings).__name__}")
+    monitor = Monitor(progress, cancel)
+    t_start = time.perf_counter()
+    timings = {}
+
+    monitor.stage(*_STAGES["patches"])
+    monitor.update(0.0, "patches")
+    t0 = time.perf_counter()
+    patches = make_patches(scene, settings.patch_size)
+    timings["patches"] = time.perf_counter() - t0
+    monitor.update(1.0, f"{len(patches.areas)} patches")
+
+    return _run(scene, settings, patches, None, None, monitor, timings, t_start, [])
+
+
+def relight(result, *, reflectance=None, emission=None, progress=None, cancel=None):
+    """Re-solve a bake with new material reflectance and/or emission, reusing its form factors.
+
+    Nodes that become emitters but were never reached get their rows computed (only those
+    rows). A matrix-free (progressive) bake kept no form factors: it is recomputed from scratch
+    and the report says so.
+
+    Parameters
+    ----------
+    result : BakeResult
+        From :func:`bake` or :func:`relight`.
+    reflectance : (M, 3) float, optional
+        New per-material reflectance in [0, 1) (default: unchanged).
+    emission : (M, 3) float, optional
+        New per-material emitted radiance >= 0 (default: unchanged).
+    progress, cancel : callables, optional
+        As in :func:`bake`.
+
+    Returns
+    -------
+    BakeResult
+    """
+    if not isinstance(result, BakeResult) or not isinstance(result._state, _State):
+        raise TypeError(f"result must be a BakeResult from bake(); got {type(result).__name__}")
+    state = result._state
+    scene = state.scene
+    M = len(scene.reflectance)
+    changes = {}
+    for name, value in (("reflectance", reflectance), ("emission", emission)):
+        if value is None:
+            continue
+        arr = np.array(value, dtype=np.float64)
+        if arr.shape != (M, 3):
+            raise ValueError(f"{name} must have shape (M, 3) = ({M}, 3); got {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"{name} must be finite")
+        if name == "reflectance" and (np.any(arr < 0) or np.any(arr >= 1)):
+            raise ValueError(f"reflectance must lie in [0, 1); got [{arr.min():.6g}, "
+                             f"{arr.max():.6g}]")
+        if name == "emission" and np.any(arr < 0):
+            raise ValueError(f"emission must be >= 0; got minimum {arr.min():.6g}")
+        arr.setflags(write=False)
+        changes[name] = arr
+    new_scene = dataclasses.replace(scene, **changes)
+    if not np.any(new_scene.emission[state.patches.material] > 0):
+        raise ValueError("emission leaves no emitting patch: nothing to light the scene")
+    monitor = Monitor(progress, cancel)
+    t_start = time.perf_counter()
+    warnings = []
+    if state.matrix_free:
+        warnings.append("relight: the bake kept no form factors (matrix-free progressive): "
+                        "they were recomputed")
+        timings = {}
+        monitor.stage(*_STAGES["patches"])
+        monitor.update(1.0, "patches")
+        timings["patches"] = 0.0
+        return _run(new_scene, state.settings, state.patches, None, None, monitor, timings,
+                    t_start, warnings)
+    timings = {"patches": 0.0}
+    return _run(new_scene, state.settings, state.patches, state.store, state.active, monitor,
+                timings, t_start, warnings)
+
+
+def _run(scene, settings, patches, store, active, monitor, timings, t_start, warnings):
+    """Form factors (discovery, reusing ``store``), solve, colours, report."""
+    from .colours import corner_colours
+
+    P = len(patches.areas)
+    N = 2 * P
+    rho, le, areas, allowed = _node_arrays(scene, patches, settings.two_sided)
+    emitting = np.flatnonzero(np.any(le > 0, axis=1) & allowed)
+
+    # --- form factors: discovery from the emitters (only new ones when relighting)
+    monitor.stage(*_STAGES["form_factors"])
+    monitor.update(0.0, "form factors")
+    t0 = time.perf_counter()
+    rng = np.random.default_rng(settings.seed)
+    if store is not None:
+        # Rows for nodes not reached before: a separate stream, so kept rows stay as they were.
+        rng = np.random.default_rng([settings.seed, 1])
+    rows_fn = _row_function(patches, settings.method, settings.resolution,
+                            settings.rotate_hemicube, rng, settings.rays)
+    batcher = _Batcher(N)
+    if store is None:
+        store = _RowStore(N)
+        active = np.zeros(N, dtype=bool)
+    else:
+        store = store.copy()
+    frontier = emitting[~active[emitting]]
+    active, overflow = _discover(store, rows_fn, allowed, active, frontier, monitor,
+                                 settings.memory_budget, batcher)
+    monitor.update(1.0, "form factors done")
+    timings["form_factors"] = time.perf_counter() - t0
+
+    # --- solve
+    monitor.stage(*_STAGES["solve"])
+    monitor.update(0.0, "solving")
+    t0 = time.perf_counter()
+    idx = np.flatnonzero(active)
+    n_a = len(idx)
+    solver = settings.solver
+    if not overflow:
+        if solver == "auto":
+            if n_a <= AUTO_DIRECT_MAX_NODES and 8 * n_a * n_a <= settings.memory_budget:
+                solver = "direct"
+            elif 4 * n_a * n_a <= settings.memory_budget:
+                solver = "gauss_seidel"
+            else:
+                solver = "progressive_free"
+        else:
+            need = (8 if solver == "direct" else 4) * n_a * n_a
+            if need > settings.memory_budget:
+                warnings.append(f"solver '{solver}' needs {need / 2**20:.0f} MiB of form "
+                                f"factors for {n_a} nodes, over memory_budget "
+                                f"({settings.memory_budget / 2**20:.0f} MiB): used matrix-free "
+                                "progressive refinement instead")
+                solver = "progressive_free"
+    else:
+        solver = "progressive_free"
+        warnings.append(f"form factors of the reachable nodes exceed memory_budget "
+                        f"({settings.memory_budget / 2**20:.0f} MiB): used matrix-free "
+                        "progressive refinement (rows recomputed on demand, slower)")
+
+    node_radiance = np.zeros((N, 3))
+    energy_rgb = None
+    if solver != "progressive_free":
+        dtype = np.float64 if solver == "direct" else np.float32
+        F = store.assemble(idx, idx, dtype)
+        black = np.flatnonzero(~allowed)
+        black_block = store.assemble(idx, black, np.float32) if len(black) else None
+        ff_bytes = F.nbytes + (black_block.nbytes if black_block is not None else 0)
+        common = dict(tol=settings.tolerance, monitor=monitor)
+        if solver == "direct":
+            sol = solve_direct(F, rho[idx], le[idx], monitor=monitor)
+        elif solver == "jacobi":
+            sol = solve_jacobi(F, rho[idx], le[idx], max_iterations=settings.max_iterations,
+                               **common)
+        elif solver == "gauss_seidel":
+            sol = solve_gauss_seidel(F, rho[idx], le[idx],
+                                     max_iterations=settings.max_iterations, **common)
+        else:
+            sol = solve_progressive(None, areas[idx], rho[idx], le[idx], F=F,
+                                    max_shots=settings.max_iterations * max(n_a, 1), **common)
+        L = sol.radiance
+        node_radiance[idx] = L
+        # incident power per node (radiance x area), for the energy balance and the warnings
+        H = np.zeros((N, 3))
+        H[idx] = _matmul_chunked(F, L)
+        incident = H * areas[:, None]
+        sent = areas[idx, None] * L                              # (n_a, 3)
+        if black_block is not None:
+            incident[black] = black_block.T.astype(np.float64) @ sent
+        escaped = ((1.0 - store.row_sums[idx])[:, None] * sent).sum(axis=0)
+        absorbed = ((1.0 - rho) * incident).sum(axis=0)
+        emitted = (le[idx] * areas[idx, None]).sum(axis=0)
+        energy_rgb = (emitted, absorbed, escaped)
+        del F, black_block
+    else:
+        cache_store = store
+
+        def rows_on_demand(nodes):
+            out = np.empty((len(nodes), N))
+            have = cache_store.has(nodes)
+            if have.any():
+                out[have] = cache_store.rows(nodes[have])
+            if (~have).any():
+                out[~have] = rows_fn(nodes[~have])
+            return out
+
+        sol = solve_progressive(rows_on_demand, areas, rho, le, tol=settings.tolerance,
+                                max_shots=settings.max_iterations * N,
+                                batch=int(np.clip(batcher.size, 1, MAX_SHOOT_BATCH)),
+                                monitor=monitor)
+        node_radiance = sol.radiance
+        st = sol.stats
+        incident = st["incident"]
+        energy_rgb = (st["emitted"], st["absorbed"], st["escaped"])
+        ff_bytes = store.nbytes
+        idx = np.flatnonzero(np.any(incident > 0, axis=1) | np.any(le > 0, axis=1))
+        n_a = len(idx)
+        solver = "progressive"
+        store = None                                    # nothing kept for relight
+    monitor.update(1.0, "solved")
+    timings["solve"] = time.perf_counter() - t0
+    if not sol.converged:
+        warnings.append(f"solver '{sol.solver}' stopped after {sol.iterations} iterations at "
+                        f"residual {sol.residual:.3g} > tolerance {settings.tolerance:g}")
+
+    # --- colours
+    monitor.stage(*_STAGES["colours"])
+    monitor.update(0.0, "colours")
+    t0 = time.perf_counter()
+    patch_radiance = node_radiance[:P].copy()
+    colours = corner_colours(scene, patches, patch_radiance, crease_angle=settings.crease_angle)
+    timings["colours"] = time.perf_counter() - t0
+    monitor.update(1.0, "done")
+    timings["total"] = time.perf_counter() - t_start
+
+    n_back = _faces_lit_from_behind(patches, incident, scene.emission)
+    if n_back:
+        warnings.append(f"{n_back} faces receive more light on their back side: check normals")
+    emitted, absorbed, escaped = (float(np.pi * x.sum()) for x in energy_rgb)
+    report = dict(
+        patches=P,
+        nodes_active=int(n_a),
+        faces_dropped=int(np.count_nonzero(~np.asarray(scene.face_valid))),
+        method=settings.method,
+        solver=solver,
+        iterations=int(sol.iterations),
+        residual=float(sol.residual),
+        converged=bool(sol.converged),
+        timings=timings,
+        energy=dict(emitted=emitted, absorbed=absorbed, escaped=escaped,
+                    balance=emitted - absorbed - escaped),
+        form_factor_bytes=int(ff_bytes),
+        warnings=warnings,
+    )
+    state = _State(scene, settings, patches, store, active, store is None)
+    return BakeResult(colours, patch_radiance, node_radiance, patches, report, state)
+
+
+def _matmul_chunked(F, L, chunk=512):
+    out = np.empty((F.shape[0], 3))
+    for s in range(0, F.shape[0], chunk):
+        out[s:s + chunk] = F[s:s + chunk].astype(np.float64, copy=False) @ L
+    return out
+
+
+def _faces_lit_from_behind(patches, incident, emission):
+    """Number of non-emitting faces whose back nodes receive more power than their front nodes."""
+    P = len(patches.areas)
+    power = incident.sum(axis=1)
+    n_faces = len(patches.face_patch_start) - 1
+    front = np.bincount(patches.face, weights=power[:P], minlength=n_faces)
+    back = np.bincount(patches.face, weights=power[P:], minlength=n_faces)
+    emits = np.zeros(n_faces, dtype=bool)
+    emits[patches.face[np.any(np.asarray(emission)[patches.material] > 0, axis=1)]] = True
+    return int(np.count_nonzero((back > BACKLIGHT_RATIO * front) & (back > 0) & ~emits))

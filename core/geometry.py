@@ -1,0 +1,261 @@
+"""Polygon helpers: Newell normals and areas, convexity of quads, triangulation.
+
+Everything works on padded polygon arrays ``(n, K, 3)`` in scene metres. A polygon with fewer than
+``K`` corners repeats its last corner (a repeated corner adds a zero-length edge, which changes
+neither the Newell vector nor the shape), or its true corner counts are given as ``sizes``.
+"""
+
+import numpy as np
+
+#: Turn (unit cross product of consecutive edges, along the normal) below which a quad corner
+#: counts as reflex. Slightly negative so that a straight corner (a quad with a vertex on an
+#: edge, turn 0 up to rounding) stays "convex": the bilinear grid handles it without folding.
+CONVEX_TURN_TOLERANCE = -1e-12
+
+#: Relative size (against the polygon's squared extent) below which an ear triangle counts as
+#: degenerate (collinear corners) in ear clipping: float64 rounding of 2-D cross products.
+EAR_AREA_TOLERANCE = 1e-14
+
+
+def _as_polygons(name, polygons):
+    arr = np.asarray(polygons, dtype=np.float64)
+    if arr.ndim != 3 or arr.shape[2] != 3 or arr.shape[1] < 3:
+        raise ValueError(f"{name} must have shape (n, K, 3) with K >= 3; got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite; got NaN or inf")
+    return arr
+
+
+def newell_vectors(polygons, sizes=None):
+    """Newell vector of every polygon: normal direction, length = area.
+
+    Parameters
+    ----------
+    polygons : (n, K, 3) float
+        Corners in order (counter-clockwise about the normal that comes out).
+    sizes : (n,) int, optional
+        True corner count of each polygon (3 <= size <= K); the corners beyond are ignored.
+        Default: all K corners (pad short polygons by repeating their last corner).
+
+    Returns
+    -------
+    (n, 3) float64
+        ``0.5 * sum_k p_k x p_(k+1)``; exact area vector of a planar polygon, and the area vector
+        of the projection onto the best-fit plane of a non-planar one. It is additive: the Newell
+        vectors of the pieces of a partition sum to that of the whole.
+    """
+    poly = _as_polygons("polygons", polygons)
+    n, k = poly.shape[:2]
+    idx = np.arange(k)
+    if sizes is None:
+        nxt = np.broadcast_to((idx + 1) % k, (n, k))
+        used = np.ones((n, k), dtype=bool)
+    else:
+        sizes = np.asarray(sizes)
+        if sizes.shape != (n,) or not np.issubdtype(sizes.dtype, np.integer):
+            raise ValueError(f"sizes must be an integer array of shape ({n},); "
+                             f"got {sizes.dtype} {sizes.shape}")
+        if n and (sizes.min() < 3 or sizes.max() > k):
+            raise ValueError(f"sizes must lie in [3, {k}]; got values in [{sizes.min()}, {sizes.max()}]")
+        nxt = np.where(idx[None, :] + 1 < sizes[:, None], idx[None, :] + 1, 0)
+        used = idx[None, :] < sizes[:, None]
+    # Centre first: cross products of far-from-origin coordinates lose digits.
+    centre = poly[:, :1, :]
+    p = poly - centre
+    q = np.take_along_axis(p, nxt[:, :, None], axis=1)
+    cross = np.cross(p, q) * used[:, :, None]
+    return 0.5 * cross.sum(axis=1)
+
+
+def newell_normals_areas(polygons, sizes=None):
+    """Unit Newell normals and areas of padded polygons.
+
+    Parameters
+    ----------
+    polygons : (n, K, 3) float
+    sizes : (n,) int, optional
+        See :func:`newell_vectors`.
+
+    Returns
+    -------
+    normals : (n, 3) float64
+        Unit normals; zero rows for polygons of zero area.
+    areas : (n,) float64
+    """
+    vec = newell_vectors(polygons, sizes)
+    areas = np.linalg.norm(vec, axis=1)
+    safe = np.where(areas > 0, areas, 1.0)
+    normals = np.where((areas > 0)[:, None], vec / safe[:, None], 0.0)
+    return normals, areas
+
+
+def corner_turns(polygons, normals):
+    """Turn at every corner: (e_in x e_out) . normal / (|e_in| |e_out|).
+
+    Parameters
+    ----------
+    polygons : (n, K, 3) float
+    normals : (n, 3) float
+        Unit normal of each polygon (its counter-clockwise side).
+
+    Returns
+    -------
+    (n, K) float64
+        Sine of the turning angle at each corner: > 0 convex, < 0 reflex, 0 straight (or a
+        zero-length edge).
+    """
+    poly = _as_polygons("polygons", polygons)
+    normals = np.asarray(normals, dtype=np.float64)
+    if normals.shape != (poly.shape[0], 3):
+        raise ValueError(f"normals must have shape ({poly.shape[0]}, 3); got {normals.shape}")
+    e_out = np.roll(poly, -1, axis=1) - poly
+    e_in = poly - np.roll(poly, 1, axis=1)
+    cross = np.einsum("nkj,nj->nk", np.cross(e_in, e_out), normals)
+    scale = np.linalg.norm(e_in, axis=2) * np.linalg.norm(e_out, axis=2)
+    return np.where(scale > 0, cross / np.where(scale > 0, scale, 1.0), 0.0)
+
+
+def quads_convex(quads, normals):
+    """Whether each quad has no reflex corner, seen along its normal.
+
+    Parameters
+    ----------
+    quads : (n, 4, 3) float
+    normals : (n, 3) float
+        Unit normal of each quad.
+
+    Returns
+    -------
+    (n,) bool
+        True where every corner turn is >= ``CONVEX_TURN_TOLERANCE`` (straight corners count
+        as convex: a bilinear grid on such a quad does not fold).
+    """
+    quads = _as_polygons("quads", quads)
+    if quads.shape[1] != 4:
+        raise ValueError(f"quads must have shape (n, 4, 3); got {quads.shape}")
+    return np.all(corner_turns(quads, normals) >= CONVEX_TURN_TOLERANCE, axis=1)
+
+
+def split_concave_quads(quads, normals):
+    """Split quads with one reflex corner into two triangles along the diagonal from it.
+
+    Parameters
+    ----------
+    quads : (n, 4, 3) float
+    normals : (n, 3) float
+        Unit normal of each quad.
+
+    Returns
+    -------
+    (n, 2, 3) int64
+        Local corner indices (0..3) of the two triangles of each quad, counter-clockwise. The
+        diagonal runs from the most reflex corner r to r + 2, which keeps both triangles inside
+        the quad (a simple quad has at most one reflex corner).
+    """
+    turns = corner_turns(quads, normals)
+    r = np.argmin(turns, axis=1)
+    local = (r[:, None] + np.arange(4)[None, :]) % 4
+    return np.stack([local[:, [0, 1, 2]], local[:, [0, 2, 3]]], axis=1).astype(np.int64)
+
+
+def plane_basis(normal):
+    """Two unit vectors (u, v) with (u, v, normal) right-handed.
+
+    Parameters
+    ----------
+    normal : (3,) float
+        Unit vector.
+
+    Returns
+    -------
+    u, v : (3,) float64
+    """
+    normal = np.asarray(normal, dtype=np.float64)
+    helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
+    u = np.cross(helper, normal)
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)
+    return u, v
+
+
+def triangulate_polygon(points, normal):
+    """Ear-clipping triangulation of one simple polygon in its plane.
+
+    Set-up code (one call per n-gon face); each step tests every candidate ear at once and clips
+    the best-shaped one (largest smallest angle), which avoids some needless slivers (greedy: not
+    an optimal triangulation).
+
+    Parameters
+    ----------
+    points : (k, 3) float
+        Corners, counter-clockwise about ``normal``; k >= 3.
+    normal : (3,) float
+        Unit normal of the polygon (e.g. its Newell normal).
+
+    Returns
+    -------
+    (t, 3) int64
+        Local corner indices of the triangles, counter-clockwise about ``normal``. ``t = k - 2``
+        for a polygon without degenerate (collinear) corner runs; triangles of zero area are left
+        out, so ``t`` may be smaller.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3 or pts.shape[0] < 3:
+        raise ValueError(f"points must have shape (k, 3) with k >= 3; got {pts.shape}")
+    normal = np.asarray(normal, dtype=np.float64)
+    if normal.shape != (3,) or not np.isfinite(normal).all() or np.linalg.norm(normal) == 0:
+        raise ValueError(f"normal must be a non-zero finite (3,) vector; got {normal!r}")
+    u, v = plane_basis(normal / np.linalg.norm(normal))
+    rel = pts - pts.mean(axis=0)
+    xy = np.stack([rel @ u, rel @ v], axis=1)
+    extent = float(np.ptp(xy, axis=0).max()) if len(xy) else 0.0
+    tiny = EAR_AREA_TOLERANCE * max(extent, np.finfo(float).tiny) ** 2
+
+    remaining = list(range(pts.shape[0]))
+    triangles = []
+    while len(remaining) > 3:
+        ring = np.array(remaining)
+        a, b, c = xy[np.roll(ring, 1)], xy[ring], xy[np.roll(ring, -1)]
+        cross = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+        convex = cross > tiny
+        cand = np.flatnonzero(convex)
+        if cand.size:
+            # Any other ring corner inside or on a candidate ear (not at its own corners) blocks it.
+            p = xy[ring][None, :, :]
+            ca, cb, cc = a[cand][:, None, :], b[cand][:, None, :], c[cand][:, None, :]
+
+            def side(s, t):
+                return (t[..., 0] - s[..., 0]) * (p[..., 1] - s[..., 1]) - \
+                       (t[..., 1] - s[..., 1]) * (p[..., 0] - s[..., 0])
+
+            inside = (side(ca, cb) >= -tiny) & (side(cb, cc) >= -tiny) & (side(cc, ca) >= -tiny)
+            at_corner = (np.all(p == ca, axis=2) | np.all(p == cb, axis=2) | np.all(p == cc, axis=2))
+            blocked = np.any(inside & ~at_corner, axis=1)
+            ok = cand[~blocked]
+        else:
+            ok = cand
+        if ok.size:
+            pa, pb, pc = a[ok], b[ok], c[ok]
+            angles = np.stack([_angle(pa, pb, pc), _angle(pb, pc, pa), _angle(pc, pa, pb)], axis=1)
+            pick = int(ok[np.argmax(angles.min(axis=1))])
+        else:
+            # No clean ear (numerically degenerate or self-touching input): clip the most convex
+            # corner so the loop always ends; a zero-area triangle is dropped below.
+            pick = int(np.argmax(cross))
+        n = len(remaining)
+        triangles.append((remaining[(pick - 1) % n], remaining[pick], remaining[(pick + 1) % n]))
+        del remaining[pick]
+    triangles.append(tuple(remaining))
+    tris = np.array(triangles, dtype=np.int64)
+    t2 = xy[tris]
+    area2 = ((t2[:, 1, 0] - t2[:, 0, 0]) * (t2[:, 2, 1] - t2[:, 0, 1])
+             - (t2[:, 1, 1] - t2[:, 0, 1]) * (t2[:, 2, 0] - t2[:, 0, 0]))
+    return tris[area2 > tiny]
+
+
+def _angle(a, b, c):
+    """Angle at a of the 2-D triangles (a, b, c); arrays (n, 2)."""
+    e1, e2 = b - a, c - a
+    cos = np.sum(e1 * e2, axis=1) / np.maximum(np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1),
+                                              np.finfo(float).tiny)
+    return np.arccos(np.clip(cos, -1.0, 1.0))

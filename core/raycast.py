@@ -1,0 +1,361 @@
+"""Vectorised ray casting against triangles: a NumPy BVH and wavefront traversal.
+
+The tree is built level by level (object-median split on the longest axis of the centroid bounds,
+one sort per level for all nodes of that level) and traversed as a *wavefront*: an array of
+(ray, node) pairs is slab-tested at once, inner nodes expand into their two children, and leaf
+nodes expand into (ray, triangle) pairs that are intersected at once with Moller-Trumbore. Python
+loops run over tree levels and ray chunks only, never over rays, nodes or triangles.
+
+Hit convention: a ray ``o + t d`` hits a triangle at ``0 < t < t_max`` (strict at both ends, as a
+shadow ray to a light at ``t_max`` must not count the light). Barycentric bounds are inclusive with a
+tiny tolerance so that a ray through a shared edge hits both triangles and never leaks through;
+ties in ``t`` go to the lowest triangle index, so results are deterministic.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Triangles per leaf at most. Larger leaves mean fewer wavefront levels (each level costs a few
+#: NumPy calls over all pairs) but more ray-triangle tests. Measured on room_with_boxes(2000)
+#: (3932 triangles, 40k patch-to-patch rays, CPU time): 2 -> 69k, 4 -> 66k, 8 -> 51k,
+#: 16 -> 30k rays/s; 4 ties with 2 with half the nodes.
+LEAF_SIZE = 4
+
+#: A ray counts as parallel to a triangle when |cos| of the angle between the ray and the plane's
+#: normal is below this; such rays never hit it (they would graze it at t = inf or everywhere).
+PARALLEL_EPS = 1e-12
+
+#: Barycentric slack: triangles are enlarged by this fraction of their edges, so that rounding can
+#: never open a crack along an edge shared by two triangles.
+BARY_EPS = 1e-12
+
+#: Node boxes are padded by this fraction of the scene's bounding-box diagonal so that flat boxes
+#: (axis-aligned triangles) are not lost to rounding in the slab test. The test stays conservative:
+#: leaves are intersected exactly.
+BOX_PAD = 1e-9
+
+#: Rays per traversal chunk: bounds the (ray, node) and (ray, triangle) pair arrays, a few tens of
+#: MB at worst for scenes of 1e5 triangles.
+RAY_CHUNK = 8192
+
+
+@dataclass(frozen=True)
+class BVH:
+    """Bounding-volume hierarchy over triangles (build it with :func:`build_bvh`).
+
+    Attributes
+    ----------
+    boxes : (n_nodes, 2, 3) float64
+        Padded node boxes: ``boxes[:, 0]`` low corner, ``boxes[:, 1]`` high corner.
+    child : (n_nodes,) int64
+        Index of the left child (the right one is ``child + 1``); -1 for a leaf.
+    start, count : (n_nodes,) int64
+        Range of the node's triangles in ``order``.
+    order : (T,) int64
+        Original triangle index of each tree slot.
+    v0, e1, e2 : (T, 3) float64
+        First corner and the two edges of each triangle, in tree order.
+    scale : (T,) float64
+        ``|e1 x e2|`` (twice the area), in tree order.
+    n_triangles : int
+        T.
+    """
+
+    boxes: np.ndarray
+    child: np.ndarray
+    start: np.ndarray
+    count: np.ndarray
+    order: np.ndarray
+    v0: np.ndarray
+    e1: np.ndarray
+    e2: np.ndarray
+    scale: np.ndarray
+    n_triangles: int
+
+    @property
+    def lo(self):
+        """(n_nodes, 3) low corners of the node boxes."""
+        return self.boxes[:, 0]
+
+    @property
+    def hi(self):
+        """(n_nodes, 3) high corners of the node boxes."""
+        return self.boxes[:, 1]
+
+    @property
+    def depth(self):
+        """Number of levels of the tree (the root alone is depth 1)."""
+        depth, level = 0, np.array([0])
+        while level.size:
+            depth += 1
+            c = self.child[level]
+            c = c[c >= 0]
+            level = np.concatenate([c, c + 1])
+        return depth
+
+
+def _segment_ids(counts):
+    """For segments of the given lengths laid end to end: (segment id, offset in segment)."""
+    total = int(counts.sum())
+    seg = np.repeat(np.arange(counts.size), counts)
+    firsts = np.cumsum(counts) - counts
+    return seg, np.arange(total) - firsts[seg]
+
+
+def build_bvh(triangles):
+    """Build a BVH over triangles.
+
+    Parameters
+    ----------
+    triangles : (T, 3, 3) array_like of float
+        Corner coordinates of each triangle, T >= 1. Degenerate triangles are allowed (never hit).
+
+    Returns
+    -------
+    BVH
+
+    Raises
+    ------
+    ValueError
+        If ``triangles`` has the wrong shape, is empty or holds NaN/inf.
+    """
+    tris = np.asarray(triangles, dtype=np.float64)
+    if tris.ndim != 3 or tris.shape[1:] != (3, 3):
+        raise ValueError(f"triangles must have shape (T, 3, 3); got {tris.shape}")
+    if tris.shape[0] == 0:
+        raise ValueError("triangles must hold at least one triangle; got 0")
+    if not np.all(np.isfinite(tris)):
+        bad = int(np.flatnonzero(~np.all(np.isfinite(tris), axis=(1, 2)))[0])
+        raise ValueError(f"triangles must be finite; triangle {bad} holds NaN or inf")
+
+    n_tri = tris.shape[0]
+    tlo = tris.min(axis=1)
+    thi = tris.max(axis=1)
+    cent = tris.mean(axis=1)
+    pad = BOX_PAD * max(float(np.linalg.norm(thi.max(axis=0) - tlo.min(axis=0))), 1.0)
+
+    order = np.arange(n_tri, dtype=np.int64)
+    lo_levels, hi_levels, child_levels, start_levels, count_levels = [], [], [], [], []
+    level_start = np.array([0], dtype=np.int64)
+    level_count = np.array([n_tri], dtype=np.int64)
+    next_id = 1                                     # id of the first node of the next level
+    while level_start.size:
+        seg, off = _segment_ids(level_count)
+        slots = level_start[seg] + off              # tree slots of this level, grouped by node
+        firsts = np.cumsum(level_count) - level_count
+        members = order[slots]
+        lo_levels.append(np.minimum.reduceat(tlo[members], firsts, axis=0) - pad)
+        hi_levels.append(np.maximum.reduceat(thi[members], firsts, axis=0) + pad)
+        start_levels.append(level_start)
+        count_levels.append(level_count)
+
+        split = level_count > LEAF_SIZE
+        child = np.full(level_start.size, -1, dtype=np.int64)
+        n_split = int(split.sum())
+        child[split] = next_id + 2 * np.arange(n_split)
+        child_levels.append(child)
+        if n_split == 0:
+            break
+        # Median split of every splitting node at once: sort its members by centroid along the
+        # longest axis of its centroid bounds, first half left, second half right.
+        clo = np.minimum.reduceat(cent[members], firsts, axis=0)
+        chi = np.maximum.reduceat(cent[members], firsts, axis=0)
+        axis = np.argmax(chi - clo, axis=1)
+        in_split = split[seg]
+        s_slots, s_seg = slots[in_split], seg[in_split]
+        key = cent[order[s_slots], axis[s_seg]]
+        perm = np.lexsort((key, s_seg))             # s_seg is already grouped: order by key inside
+        order[s_slots] = order[s_slots][perm]
+
+        st, ct = level_start[split], level_count[split]
+        half = ct // 2
+        level_start = np.stack([st, st + half], axis=1).ravel()
+        level_count = np.stack([half, ct - half], axis=1).ravel()
+        next_id += 2 * n_split
+
+    tri_sorted = tris[order]
+    v0 = tri_sorted[:, 0]
+    e1 = tri_sorted[:, 1] - v0
+    e2 = tri_sorted[:, 2] - v0
+    return BVH(
+        boxes=np.stack([np.concatenate(lo_levels), np.concatenate(hi_levels)], axis=1),
+        child=np.concatenate(child_levels), start=np.concatenate(start_levels),
+        count=np.concatenate(count_levels), order=order,
+        v0=v0, e1=e1, e2=e2, scale=np.linalg.norm(np.cross(e1, e2), axis=1),
+        n_triangles=n_tri,
+    )
+
+
+def _cross(a, b):
+    """Row-wise cross product of (M, 3) arrays (np.cross is several times slower for this)."""
+    a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
+    b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=1)
+
+
+def _dot(a, b):
+    return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
+
+
+def _intersect(o, d, dn, v0, e1, e2, scale):
+    """Moller-Trumbore for paired rays and triangles (all (M, 3)); t of the hit, inf on a miss."""
+    p = _cross(d, e2)
+    det = _dot(e1, p)
+    ok = np.abs(det) > PARALLEL_EPS * scale * dn
+    inv = np.divide(1.0, det, out=np.zeros_like(det), where=ok)
+    s = o - v0
+    u = _dot(s, p) * inv
+    q = _cross(s, e1)
+    v = _dot(d, q) * inv
+    t = _dot(e2, q) * inv
+    ok &= (u >= -BARY_EPS) & (v >= -BARY_EPS) & (u + v <= 1.0 + BARY_EPS) & (t > 0.0)
+    return np.where(ok, t, np.inf)
+
+
+def _check_rays(bvh, origins, directions, t_max):
+    if not isinstance(bvh, BVH):
+        raise TypeError(f"bvh must be a BVH from build_bvh; got {type(bvh).__name__}")
+    o = np.asarray(origins, dtype=np.float64)
+    d = np.asarray(directions, dtype=np.float64)
+    if o.ndim != 2 or o.shape[1] != 3:
+        raise ValueError(f"origins must have shape (N, 3); got {o.shape}")
+    if d.shape != o.shape:
+        raise ValueError(f"directions must have shape {o.shape} like origins; got {d.shape}")
+    if not np.all(np.isfinite(o)):
+        raise ValueError("origins must be finite; got NaN or inf")
+    if not np.all(np.isfinite(d)):
+        raise ValueError("directions must be finite; got NaN or inf")
+    dn = np.linalg.norm(d, axis=1)
+    if np.any(dn == 0.0):
+        raise ValueError(f"directions must be non-zero; row {int(np.flatnonzero(dn == 0)[0])} is zero")
+    tm = np.asarray(t_max, dtype=np.float64)
+    if tm.ndim == 0:
+        tm = np.full(o.shape[0], float(tm))
+    if tm.shape != (o.shape[0],):
+        raise ValueError(f"t_max must be a float or have shape ({o.shape[0]},); got {tm.shape}")
+    if np.any(np.isnan(tm)) or np.any(tm <= 0.0):
+        raise ValueError("t_max must be > 0 (inf allowed); got a value <= 0 or NaN")
+    return o, d, dn, tm
+
+
+def _slab(box, o, inv, limit):
+    """Slab test of paired boxes (M, 2, 3) = (lo, hi) and rays: (M,) bool.
+
+    fmin/fmax drop the NaN of 0 * inf (origin on a slab plane of an axis the ray is parallel
+    to), which keeps the test conservative.
+    """
+    with np.errstate(invalid="ignore"):
+        t = (box - o[:, None, :]) * inv[:, None, :]
+    near = np.fmin(t[:, 0], t[:, 1])
+    far = np.fmax(t[:, 0], t[:, 1])
+    # explicit over the 3 axes: ufunc.reduce along a length-3 axis is several times slower
+    tn = np.fmax(np.fmax(near[:, 0], near[:, 1]), near[:, 2])
+    tf = np.fmin(np.fmin(far[:, 0], far[:, 1]), far[:, 2])
+    return (tf >= np.maximum(tn, 0.0)) & (tn <= limit)
+
+
+def _traverse(bvh, o, d, dn, t_max, any_mode):
+    """Wavefront traversal of one chunk of rays: (t, original triangle index or -1).
+
+    Pairs (ray, node) in the wavefront have already passed the node's box test; an inner pair
+    tests both children's boxes at once (they are adjacent in the node arrays) and only the
+    children that pass become pairs of the next step.
+    """
+    n = o.shape[0]
+    with np.errstate(divide="ignore"):
+        inv = 1.0 / d
+    best_t = t_max.copy()
+    best_tri = np.full(n, -1, dtype=np.int64)
+    boxes = bvh.boxes
+    ray = np.flatnonzero(_slab(np.broadcast_to(boxes[0], (n, 2, 3)), o, inv, best_t))
+    node = np.zeros(ray.size, dtype=np.int64)
+    while ray.size:
+        if any_mode:
+            live = best_tri[ray] < 0
+            ray, node = ray[live], node[live]
+        child = bvh.child[node]
+        leaf = child < 0
+        lr, ln = ray[leaf], node[leaf]
+        if lr.size:
+            seg, off = _segment_ids(bvh.count[ln])
+            rr = lr[seg]
+            slot = bvh.start[ln][seg] + off
+            t = _intersect(o[rr], d[rr], dn[rr], bvh.v0[slot], bvh.e1[slot], bvh.e2[slot],
+                           bvh.scale[slot])
+            tri = bvh.order[slot]
+            bt = best_t[rr]
+            # Equal t to a hit found earlier is kept as a candidate so that ties go to the lowest
+            # triangle index whatever the order the leaves were reached in.
+            cand = (t < bt) | ((t == bt) & (best_tri[rr] >= 0))
+            rr, t, tri = rr[cand], t[cand], tri[cand]
+            if any_mode:
+                best_tri[rr] = tri
+            elif rr.size:
+                old = best_t[rr]
+                np.minimum.at(best_t, rr, t)
+                best_tri[rr[best_t[rr] < old]] = np.iinfo(np.int64).max
+                win = t == best_t[rr]
+                np.minimum.at(best_tri, rr[win], tri[win])
+
+        inner = ~leaf
+        ir, c = ray[inner], child[inner]
+        if not ir.size:
+            break
+        oi, ii, lim = o[ir], inv[ir], best_t[ir]
+        cb = boxes[c[:, None] + np.array([0, 1])]                  # (M, 2 children, 2, 3)
+        ok0 = _slab(cb[:, 0], oi, ii, lim)
+        ok1 = _slab(cb[:, 1], oi, ii, lim)
+        ray = np.concatenate([ir[ok0], ir[ok1]])
+        node = np.concatenate([c[ok0], c[ok1] + 1])
+    return best_t, best_tri
+
+
+def closest_hit(bvh, origins, directions, t_max=np.inf):
+    """Closest triangle hit by each ray.
+
+    Parameters
+    ----------
+    bvh : BVH
+    origins, directions : (N, 3) array_like of float
+        Rays ``origins + t * directions``; directions need not be unit (t is in their units) but
+        must be non-zero.
+    t_max : float or (N,) array_like of float
+        Hits count for ``0 < t < t_max``; > 0, inf allowed.
+
+    Returns
+    -------
+    t : (N,) float64
+        Parameter of the closest hit; inf on a miss.
+    tri : (N,) int64
+        Index of the hit triangle in the array given to :func:`build_bvh`, -1 on a miss. Ties in
+        ``t`` go to the lowest index.
+    """
+    o, d, dn, tm = _check_rays(bvh, origins, directions, t_max)
+    t_out = np.full(o.shape[0], np.inf)
+    tri_out = np.full(o.shape[0], -1, dtype=np.int64)
+    for a in range(0, o.shape[0], RAY_CHUNK):
+        b = a + RAY_CHUNK
+        t, tri = _traverse(bvh, o[a:b], d[a:b], dn[a:b], tm[a:b], any_mode=False)
+        hit = tri >= 0
+        t_out[a:b][hit] = t[hit]
+        tri_out[a:b][hit] = tri[hit]
+    return t_out, tri_out
+
+
+def any_hit(bvh, origins, directions, t_max=np.inf):
+    """Whether each ray hits any triangle at ``0 < t < t_max`` (shadow rays).
+
+    Parameters are those of :func:`closest_hit`.
+
+    Returns
+    -------
+    (N,) bool
+    """
+    o, d, dn, tm = _check_rays(bvh, origins, directions, t_max)
+    out = np.zeros(o.shape[0], dtype=bool)
+    for a in range(0, o.shape[0], RAY_CHUNK):
+        b = a + RAY_CHUNK
+        _, tri = _traverse(bvh, o[a:b], d[a:b], dn[a:b], tm[a:b], any_mode=True)
+        out[a:b] = tri >= 0
+    return out

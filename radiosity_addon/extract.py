@@ -1,0 +1,323 @@
+"""Blender scene -> the core's arrays (Blender's own corner layout, world space, metres).
+
+Everything visible and renderable in the evaluated depsgraph takes part: modifiers applied,
+collection and geometry-node instances included, world transforms and the scene's unit scale
+applied. Only real (non-instance) mesh objects receive the result; instances light and shadow
+the scene but share their mesh data with their source, so nothing is written to them.
+Area lights become emitting polygons (see :func:`_area_light_faces`).
+"""
+
+from dataclasses import dataclass, field
+
+import bpy
+import numpy as np
+
+from .materials import MaterialReader, area_light_polygon, area_light_radiance
+
+#: An area light is modelled as its emitting polygon plus a black cover just behind it, so that it
+#: emits from its front only, as in Cycles (the core's polygons emit from both sides). The cover
+#: sits this fraction of the light's size behind it: small enough that almost none of the back's
+#: emission leaks past the cover's edge (< 1 % for 1e-3), large enough for the hemicube near plane.
+LIGHT_COVER_OFFSET = 1e-3
+
+
+@dataclass
+class Part:
+    """One mesh object's share of the scene arrays, for writing the result back.
+
+    Attributes
+    ----------
+    object_name : str
+        Name of the original object that receives the colours.
+    corner_start, corner_stop : int
+        Its scene corners are ``corner_start:corner_stop``; they are the evaluated mesh's corners
+        in order, except that faces of a mirrored object (negative determinant) are reversed.
+    eval_corner_of_scene : (C_part,) int64
+        Evaluated-mesh corner of every scene corner of the part.
+    world_vertices : (V_eval, 3) float64
+        Evaluated vertices in world metres (for mapping onto the original mesh's corners).
+    corner_verts, face_starts, face_sizes : int64 arrays
+        The evaluated mesh's layout (its own indices).
+    matrix_world : (4, 4) float64
+        Object to world, unit scale included.
+    """
+
+    object_name: str
+    corner_start: int
+    corner_stop: int
+    eval_corner_of_scene: np.ndarray
+    world_vertices: np.ndarray
+    corner_verts: np.ndarray
+    face_starts: np.ndarray
+    face_sizes: np.ndarray
+    matrix_world: np.ndarray
+
+
+@dataclass
+class Extraction:
+    """What :func:`extract` read: the make_scene arguments, the parts to write, the notes."""
+
+    arrays: dict
+    parts: list
+    warnings: list = field(default_factory=list)
+    notes: list = field(default_factory=list)
+    instances: int = 0
+    lights: int = 0
+
+
+def read_mesh_layout(mesh):
+    """Vertices and face layout of a mesh through float32/int32 foreach_get buffers.
+
+    Returns
+    -------
+    vertices : (V, 3) float64 (object space)
+    corner_verts : (C,) int64
+    face_starts, face_sizes, face_materials : (F,) int64
+    """
+    nv, nc, nf = len(mesh.vertices), len(mesh.loops), len(mesh.polygons)
+    co = np.empty(nv * 3, dtype=np.float32)
+    mesh.vertices.foreach_get("co", co)
+    cv = np.empty(nc, dtype=np.int32)
+    mesh.loops.foreach_get("vertex_index", cv)
+    starts = np.empty(nf, dtype=np.int32)
+    sizes = np.empty(nf, dtype=np.int32)
+    mats = np.empty(nf, dtype=np.int32)
+    mesh.polygons.foreach_get("loop_start", starts)
+    mesh.polygons.foreach_get("loop_total", sizes)
+    mesh.polygons.foreach_get("material_index", mats)
+    return (co.reshape(nv, 3).astype(np.float64), cv.astype(np.int64), starts.astype(np.int64),
+            sizes.astype(np.int64), mats.astype(np.int64))
+
+
+def transform(points, matrix):
+    """Apply a (4, 4) affine matrix to (N, 3) points."""
+    return points @ matrix[:3, :3].T + matrix[:3, 3]
+
+
+def _reverse_faces(face_starts, face_sizes):
+    """Corner permutation that reverses every face's winding, keeping its first corner.
+
+    Returns (C,) int64 ``perm``: new corner k of a face reads old corner ``perm[k]``.
+    """
+    c = int(face_sizes.sum())
+    face_of = np.repeat(np.arange(face_starts.size), face_sizes)
+    local = np.arange(c) - np.repeat(np.cumsum(face_sizes) - face_sizes, face_sizes)
+    rev = np.where(local == 0, 0, face_sizes[face_of] - local)
+    return face_starts[face_of] + rev
+
+
+def _is_visible(inst, view_layer, selected_only):
+    obj = inst.object.original
+    if obj.hide_render:
+        return False
+    if inst.is_instance:
+        owner = inst.parent.original if inst.parent is not None else obj
+        if owner.hide_render:
+            return False
+        return owner.select_get(view_layer=view_layer) if selected_only else True
+    if not obj.visible_get(view_layer=view_layer):
+        return False
+    return obj.select_get(view_layer=view_layer) if selected_only else True
+
+
+def extract(depsgraph, *, selected_only=False):
+    """Read the evaluated scene into the core's arrays.
+
+    Parameters
+    ----------
+    depsgraph : bpy.types.Depsgraph
+        An evaluated depsgraph (``context.evaluated_depsgraph_get()``).
+    selected_only : bool
+        Only selected mesh objects (and instances whose instancer is selected) take part and are
+        written. Lights always take part.
+
+    Returns
+    -------
+    Extraction
+        ``arrays`` holds the keyword arguments of ``core.scene.make_scene``.
+    """
+    scene = depsgraph.scene_eval
+    view_layer = depsgraph.view_layer
+    scale = float(scene.unit_settings.scale_length) or 1.0
+    unit = np.diag([scale, scale, scale, 1.0])
+    reader = MaterialReader()
+    out = Extraction(arrays={}, parts=[])
+    verts, corner_verts, starts, sizes, face_mats, face_objs = [], [], [], [], [], []
+    mat_keys, rho, le, object_names = {}, [], [], []
+    nv = nc = 0
+    no_material = []
+    ignored = []
+
+    def material_index(mat):
+        key = None if mat is None else mat.original.name_full
+        if key not in mat_keys:
+            r, e = reader.evaluate(None if mat is None else mat.original)
+            mat_keys[key] = len(rho)
+            rho.append(r)
+            le.append(e)
+        return mat_keys[key]
+
+    def add_faces(v_world, cv, fs, fz, fm, obj_index):
+        nonlocal nv, nc
+        verts.append(v_world)
+        corner_verts.append(cv + nv)
+        starts.append(fs + nc)
+        sizes.append(fz)
+        face_mats.append(fm)
+        face_objs.append(np.full(fs.size, obj_index, dtype=np.int64))
+        nv += v_world.shape[0]
+        nc += cv.size
+
+    for inst in depsgraph.object_instances:
+        obj = inst.object
+        if obj.type not in ("MESH", "LIGHT"):
+            if obj.type in ("CURVE", "SURFACE", "FONT", "META", "CURVES", "POINTCLOUD", "VOLUME"):
+                ignored.append(obj.name)
+            continue
+        if obj.type == "LIGHT":
+            if obj.original.hide_render:
+                continue
+            _add_light(inst, unit, out, add_faces, material_index, object_names, rho, le,
+                       mat_keys)
+            continue
+        if not _is_visible(inst, view_layer, selected_only):
+            continue
+        mesh = obj.to_mesh()
+        try:
+            v, cv, fs, fz, fm = read_mesh_layout(mesh)
+            slots = [s.material for s in obj.material_slots]
+        finally:
+            obj.to_mesh_clear()
+        if fs.size == 0:
+            continue
+        matrix = unit @ np.array(inst.matrix_world, dtype=np.float64)
+        v_world = transform(v, matrix)
+        table = np.array([material_index(m) for m in slots] or [material_index(None)])
+        if not slots or any(m is None for m in slots):
+            no_material.append(obj.name)
+        fm_global = table[np.clip(fm, 0, table.size - 1)]
+        # A mirrored transform flips the winding; Cycles keeps the front where the user sees it,
+        # so the faces are reversed to keep Newell normals on the side Cycles bakes.
+        if np.linalg.det(matrix[:3, :3]) < 0:
+            perm = _reverse_faces(fs, fz)
+        else:
+            perm = np.arange(cv.size, dtype=np.int64)
+        obj_index = len(object_names)
+        object_names.append(obj.name if not inst.is_instance else f"{obj.name} (instance)")
+        if inst.is_instance:
+            out.instances += 1
+        else:
+            out.parts.append(Part(obj.original.name, nc, nc + cv.size, perm, v_world, cv, fs, fz,
+                                  matrix))
+        add_faces(v_world, cv[perm], fs, fz, fm_global, obj_index)
+
+    if no_material:
+        out.warnings.append(f"No material on {_names(no_material)}: used the default grey "
+                            f"reflectance 0.8")
+    if ignored:
+        out.warnings.append(f"Non-mesh objects ignored: {_names(ignored)}")
+    if out.instances:
+        out.notes.append(f"{out.instances} instance(s) light and shadow the scene but receive no "
+                         "colours (they share their source's mesh)")
+    world_note = _world_warning(scene)
+    if world_note:
+        out.warnings.append(world_note)
+    out.warnings.extend(_light_warnings(depsgraph))
+    out.notes.extend(reader.notes)
+    if verts:
+        out.arrays = dict(
+            vertices=np.concatenate(verts), corner_verts=np.concatenate(corner_verts),
+            face_starts=np.concatenate(starts), face_sizes=np.concatenate(sizes),
+            face_materials=np.concatenate(face_mats), reflectance=np.array(rho),
+            emission=np.array(le), face_objects=np.concatenate(face_objs),
+            object_names=tuple(object_names),
+            material_names=tuple("(none)" if k is None else k for k in mat_keys))
+    return out
+
+
+def _add_light(inst, unit, out, add_faces, material_index, object_names, rho, le, mat_keys):
+    light = inst.object.data
+    if light.type != "AREA":
+        return  # reported by _light_warnings
+    local, _ = area_light_polygon(light)
+    matrix = unit @ np.array(inst.matrix_world, dtype=np.float64)
+    raw = np.array(inst.matrix_world, dtype=np.float64)
+    pts = transform(local, matrix)
+    raw_pts = transform(local, raw)
+    # Cycles normalises by the light's area in Blender units (measured; unit scale is display).
+    k = local.shape[0]
+    area_bu = 0.5 * np.linalg.norm(np.cross(raw_pts - raw_pts.mean(0),
+                                            np.roll(raw_pts, -1, 0) - raw_pts.mean(0)).sum(0))
+    true_area_bu = area_bu * _true_over_polygon(light, local)
+    radiance = area_light_radiance(light, true_area_bu)
+    size = float(np.linalg.norm(pts.max(0) - pts.min(0)))
+    normal = np.cross(pts[1] - pts[0], pts[2] - pts[0])
+    normal /= np.linalg.norm(normal)
+    cover = pts[::-1] - normal * (LIGHT_COVER_OFFSET * size)
+    name = inst.object.name
+    emit_key = ("light", name, len(rho))
+    mat_keys[emit_key] = len(rho)
+    rho.append(np.zeros(3))
+    le.append(radiance)
+    black_key = ("light cover",)
+    if black_key not in mat_keys:
+        mat_keys[black_key] = len(rho)
+        rho.append(np.zeros(3))
+        le.append(np.zeros(3))
+    obj_index = len(object_names)
+    object_names.append(f"{name} (area light)")
+    verts = np.concatenate([pts, cover])
+    cv = np.arange(2 * k, dtype=np.int64)
+    add_faces(verts, cv, np.array([0, k]), np.array([k, k]),
+              np.array([mat_keys[emit_key], mat_keys[black_key]]), obj_index)
+    out.lights += 1
+
+
+def _true_over_polygon(light, local):
+    """Ratio of the light's true area to its polygon's (1 for rectangles)."""
+    _, true_area = area_light_polygon(light)
+    p = local - local.mean(0)
+    poly = 0.5 * abs(np.cross(p, np.roll(p, -1, 0))[:, 2].sum())
+    return true_area / poly if poly > 0 else 1.0
+
+
+def _names(names, limit=5):
+    uniq = list(dict.fromkeys(names))
+    text = ", ".join(f"'{n}'" for n in uniq[:limit])
+    return text + (f" and {len(uniq) - limit} more" if len(uniq) > limit else "")
+
+
+def _light_warnings(depsgraph):
+    unsupported = {}
+    for inst in depsgraph.object_instances:
+        obj = inst.object
+        if obj.type == "LIGHT" and obj.data.type != "AREA" and not obj.original.hide_render:
+            unsupported.setdefault(obj.data.type.capitalize(), []).append(obj.name)
+    return [f"{kind} lights are not supported yet and were ignored: {_names(names)}"
+            for kind, names in unsupported.items()]
+
+
+def _world_warning(scene):
+    world = scene.world
+    if world is None:
+        return None
+    colour, strength = np.array(world.color[:3]), 1.0
+    tree = world.node_tree
+    if bpy.app.version < (5, 0, 0) and not world.use_nodes:  # always on (deprecated) in 5
+        tree = None
+    if tree is not None:
+        outs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld"]
+        surface = outs[0].inputs.get("Surface") if outs else None
+        if surface is None or not surface.is_linked:
+            return None
+        node = surface.links[0].from_node
+        if node.bl_idname != "ShaderNodeBackground":
+            return (f"World '{world.name}' lighting ({node.name}) is not supported yet and was "
+                    "ignored")
+        c_in, s_in = node.inputs["Color"], node.inputs["Strength"]
+        if c_in.is_linked or s_in.is_linked:
+            return f"World '{world.name}' lighting (textured) is not supported yet and was ignored"
+        colour, strength = np.array(c_in.default_value[:3]), float(s_in.default_value)
+    if strength * float(np.max(colour)) > 0:
+        return f"World '{world.name}' lighting is not supported yet and was ignored"
+    return None

@@ -1,0 +1,202 @@
+"""One bake, in three steps shared by the operator, the modal operator and the batch script.
+
+1. :func:`prepare` (main thread): read the scene into the core's arrays and check that the result
+   can be written, so nothing fails after minutes of work.
+2. :func:`compute` (any thread): ``core.bake`` on those arrays; touches no Blender data.
+3. :func:`apply` (main thread): write the attribute to every baked mesh, show it in the
+   viewports, store the summary on the scene.
+
+:class:`BakeJob` runs step 2 in a worker thread with progress and a cancel flag.
+"""
+
+import json
+import threading
+import time
+from dataclasses import dataclass
+
+from .. import core
+from ..core.errors import BakeCancelled, RadiosityError
+from .extract import extract
+from .write import WriteError, check_writable, show_in_viewports, write_colours
+
+#: Bake options that come from the panel / the batch command line and go to core.BakeSettings.
+CORE_OPTIONS = ("patch_size", "method", "resolution", "solver", "tolerance", "max_iterations")
+
+
+class BakeError(RuntimeError):
+    """A bake cannot run or its result cannot be written; the message is for the user."""
+
+
+@dataclass
+class BakeInput:
+    """Everything the worker needs, and what apply needs afterwards."""
+
+    scene: object            # core.Scene
+    settings: object         # core.BakeSettings
+    extraction: object       # extract.Extraction
+    scene_name: str
+    make_single_user: bool
+    read_seconds: float
+
+
+def options_from_props(props):
+    """Bake options (dict) from the scene's RadiositySettings property group."""
+    return dict(patch_size=props.patch_size, method=props.method.lower(),
+                resolution=props.resolution, solver=props.solver.lower(),
+                tolerance=props.tolerance, max_iterations=props.max_iterations,
+                selected_only=props.selected_only, make_single_user=props.make_single_user)
+
+
+def prepare(context, options):
+    """Read the scene and validate everything before the bake (main thread).
+
+    Parameters
+    ----------
+    context : bpy.types.Context
+    options : dict
+        Keys of :data:`CORE_OPTIONS` plus ``selected_only`` and ``make_single_user``.
+
+    Returns
+    -------
+    BakeInput
+
+    Raises
+    ------
+    BakeError
+        Edit mode, nothing to bake, no light, bad settings or unwritable meshes.
+    """
+    t0 = time.perf_counter()
+    if context.mode != "OBJECT":
+        raise BakeError("Switch to Object Mode to bake radiosity")
+    try:
+        settings = core.BakeSettings(**{k: options[k] for k in CORE_OPTIONS})
+    except (RadiosityError, ValueError, TypeError) as exc:
+        raise BakeError(f"Invalid bake setting: {exc}") from exc
+    depsgraph = context.evaluated_depsgraph_get()
+    ext = extract(depsgraph, selected_only=options["selected_only"])
+    if not ext.parts:
+        what = "selected mesh objects" if options["selected_only"] else "visible mesh objects"
+        raise BakeError(f"Nothing to bake: no {what} with faces")
+    if not (ext.arrays["emission"][ext.arrays["face_materials"]] > 0).any():
+        unsupported = "; ".join(w for w in ext.warnings if "not supported" in w)
+        raise BakeError("No light: add an emissive material or an area light"
+                        + (f" ({unsupported})" if unsupported else ""))
+    try:
+        scene = core.make_scene(**ext.arrays)
+    except RadiosityError as exc:
+        raise BakeError(str(exc)) from exc
+    objects = context.scene.objects
+    try:
+        check_writable([objects[p.object_name] for p in ext.parts],
+                       options["make_single_user"])
+    except WriteError as exc:
+        raise BakeError(str(exc)) from exc
+    return BakeInput(scene, settings, ext, context.scene.name, options["make_single_user"],
+                     time.perf_counter() - t0)
+
+
+def compute(bake_input, progress=None, cancel=None):
+    """Run the core bake (any thread). Raises core.BakeCancelled when cancelled."""
+    try:
+        return core.bake(bake_input.scene, bake_input.settings, progress=progress, cancel=cancel)
+    except BakeCancelled:
+        raise
+    except RadiosityError as exc:
+        raise BakeError(str(exc)) from exc
+
+
+def make_report(bake_input, result, write_seconds):
+    """The bake summary (JSON-serialisable dict): core report + settings + add-on notes."""
+    report = json.loads(json.dumps(result.report, default=_jsonable))
+    ext = bake_input.extraction
+    report["settings"] = {k: getattr(bake_input.settings, k) for k in CORE_OPTIONS}
+    report["objects"] = len(ext.parts)
+    report["instances"] = ext.instances
+    report["area_lights"] = ext.lights
+    report.setdefault("timings", {})
+    report["timings"]["read_scene"] = bake_input.read_seconds
+    report["timings"]["write"] = write_seconds
+    report["warnings"] = list(ext.warnings) + list(report.get("warnings", []))
+    report["notes"] = list(ext.notes)
+    return report
+
+
+def _jsonable(value):
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    return str(value)
+
+
+def apply(context, bake_input, result):
+    """Write the result (main thread) and store the summary; returns the report dict."""
+    t0 = time.perf_counter()
+    scene = context.scene
+    try:
+        write_colours({o.name: o for o in scene.objects}, bake_input.extraction.parts,
+                      result.corner_colours, make_single_user=bake_input.make_single_user)
+    except (WriteError, KeyError) as exc:
+        raise BakeError(f"Could not write the result: {exc}") from exc
+    report = make_report(bake_input, result, time.perf_counter() - t0)
+    props = getattr(scene, "radiosity", None)
+    if props is not None:
+        props.last_report = json.dumps(report)
+        if props.show_bake:
+            show_in_viewports([w.screen for w in context.window_manager.windows], True)
+    return report
+
+
+def bake_now(context, options, progress=None, cancel=None):
+    """prepare + compute + apply on the calling thread; returns the report dict."""
+    bake_input = prepare(context, options)
+    result = compute(bake_input, progress, cancel)
+    return apply(context, bake_input, result)
+
+
+class BakeJob:
+    """The core bake of a prepared input, in a worker thread.
+
+    Attributes
+    ----------
+    fraction : float
+        Progress in [0, 1], updated by the worker.
+    message : str
+    result : core.BakeResult or None
+    error : BaseException or None
+        What stopped the worker (``core.BakeCancelled`` after :meth:`cancel`).
+    """
+
+    def __init__(self, bake_input):
+        self.bake_input = bake_input
+        self.fraction = 0.0
+        self.message = "Starting"
+        self.result = None
+        self.error = None
+        self._cancel = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="radiosity-bake", daemon=True)
+
+    def start(self):
+        self._thread.start()
+        return self
+
+    def cancel(self):
+        self._cancel.set()
+
+    @property
+    def cancelled(self):
+        return self._cancel.is_set()
+
+    def done(self):
+        return not self._thread.is_alive()
+
+    def join(self, timeout=None):
+        self._thread.join(timeout)
+        return self.done()
+
+    def _progress(self, fraction, message):
+        self.fraction, self.message = float(fraction), str(message)
+
+    def _run(self):
+        try:
+            self.result = compute(self.bake_input, self._progress, self._cancel.is_set)
+        except BaseException as exc:  # handed to the main thread, never lost in the thread
+            self.error = exc

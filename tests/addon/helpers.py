@@ -1,0 +1,77 @@
+"""Scene builders for the add-on tests (real Blender data through bpy)."""
+
+import bpy
+import numpy as np
+
+
+def material(name, colour=(0.5, 0.5, 0.5), emission=None, strength=1.0, kind="principled"):
+    """A node material: Principled (default), 'diffuse' or 'emission' shader."""
+    mat = bpy.data.materials.new(name)
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True  # on by default (and deprecated) from 5.0
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    out = nodes["Material Output"]
+    if kind == "principled":
+        bsdf = nodes["Principled BSDF"]
+        bsdf.inputs["Base Color"].default_value = (*colour, 1.0)
+        if emission is not None:
+            bsdf.inputs["Emission Color"].default_value = (*emission, 1.0)
+            bsdf.inputs["Emission Strength"].default_value = strength
+        return mat
+    nodes.remove(nodes["Principled BSDF"])
+    if kind == "diffuse":
+        node = nodes.new("ShaderNodeBsdfDiffuse")
+        node.inputs["Color"].default_value = (*colour, 1.0)
+    elif kind == "emission":
+        node = nodes.new("ShaderNodeEmission")
+        node.inputs["Color"].default_value = (*(emission or colour), 1.0)
+        node.inputs["Strength"].default_value = strength
+    else:
+        raise ValueError(f"kind must be principled, diffuse or emission; got {kind!r}")
+    links.new(node.outputs[0], out.inputs["Surface"])
+    return mat
+
+
+def mesh_object(name, verts, faces, mat=None, location=(0.0, 0.0, 0.0)):
+    """A mesh object linked to the scene collection."""
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata([tuple(v) for v in verts], [], [tuple(f) for f in faces])
+    mesh.update()
+    obj = bpy.data.objects.new(name, mesh)
+    obj.location = location
+    bpy.context.scene.collection.objects.link(obj)
+    if mat is not None:
+        mesh.materials.append(mat)
+    return obj
+
+
+def square(size=1.0, z=0.0, down=False):
+    """Vertices and one face of a square centred on the z axis, normal +z (or -z)."""
+    h = 0.5 * size
+    verts = [(-h, -h, z), (h, -h, z), (h, h, z), (-h, h, z)]
+    face = (0, 3, 2, 1) if down else (0, 1, 2, 3)
+    return verts, [face]
+
+
+def box(size=1.0, inward=True):
+    """A closed cube of quads centred at the origin, normals inward (or outward)."""
+    h = 0.5 * size
+    verts = [(x, y, z) for x in (-h, h) for y in (-h, h) for z in (-h, h)]
+    faces = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    if inward:
+        faces = [tuple(reversed(f)) for f in faces]
+    return verts, faces
+
+
+def read_colours(mesh, name="Radiosity"):
+    """(C, 3) float64 colours of a corner colour attribute."""
+    attr = mesh.color_attributes[name]
+    buf = np.empty(len(attr.data) * 4, dtype=np.float32)
+    attr.data.foreach_get("color", buf)
+    return buf.reshape(-1, 4)[:, :3].astype(np.float64)
+
+
+def set_settings(scene, **kw):
+    props = scene.radiosity
+    for key, value in kw.items():
+        setattr(props, key, value)

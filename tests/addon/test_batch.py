@@ -1,0 +1,149 @@
+"""The headless batch script, run as users run it: a separate Python process with the bpy module."""
+
+import hashlib
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import bpy
+import numpy as np
+import pytest
+
+from conftest import ROOT
+from helpers import material, mesh_object, read_colours, square
+
+BATCH = os.path.join(ROOT, "radiosity_addon", "batch.py")
+CORNELL = os.path.join(ROOT, "sample_blends", "cornell_box.blend")
+
+#: Patch size for batch bakes of the Cornell box in tests: ~100 patches, a bake of a second.
+FAST = ["--patch-size", "0.2", "--resolution", "32"]
+
+
+def run_batch(*args, timeout=240):
+    proc = subprocess.run([sys.executable, BATCH, *map(str, args)], capture_output=True,
+                          text=True, timeout=timeout, cwd=ROOT)
+    return proc
+
+
+def sha256(path):
+    with open(path, "rb") as fh:
+        return hashlib.sha256(fh.read()).hexdigest()
+
+
+def one_error_line(proc):
+    lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("radiosity-batch:")]
+    assert proc.returncode != 0
+    assert len(lines) == 1, proc.stderr
+    return lines[0]
+
+
+def save_scene(path, *, light=True, meshes=True, patch_size=0.7):
+    """Save a small scene (floor + emitter) with stored bake settings to *path*."""
+    bpy.ops.wm.read_homefile(use_factory_startup=True, use_empty=True)
+    if meshes:
+        mesh_object("Floor", *square(2.0), material("grey", (0.5, 0.5, 0.5)))
+    if meshes and light:
+        mesh_object("Lamp", *square(1.0, z=1.0, down=True),
+                    material("lamp", (0, 0, 0), emission=(1, 1, 1), strength=3.0,
+                             kind="emission"))
+    if hasattr(bpy.types.Scene, "radiosity"):
+        bpy.context.scene.radiosity.patch_size = patch_size
+    bpy.ops.wm.save_as_mainfile(filepath=str(path), check_existing=False)
+
+
+def test_cornell_batch_bake_report_render_and_input_untouched(package, tmp_path):
+    src = tmp_path / "cornell.blend"
+    shutil.copyfile(CORNELL, src)
+    digest = sha256(src)
+    out, report, png = tmp_path / "baked.blend", tmp_path / "r.json", tmp_path / "cornell.png"
+    proc = run_batch(src, "--output", out, "--report", report, "--render", png, *FAST)
+    assert proc.returncode == 0, proc.stderr
+    assert sha256(src) == digest
+    assert sorted(os.listdir(tmp_path)) == ["baked.blend", "cornell.blend", "cornell.png", "r.json"]
+    data = json.loads(report.read_text())
+    for key in ("settings", "patches", "timings", "iterations", "residual", "energy", "warnings"):
+        assert key in data
+    assert data["settings"]["patch_size"] == pytest.approx(0.2)
+    assert data["settings"]["resolution"] == 32
+
+    bpy.ops.wm.open_mainfile(filepath=str(out), load_ui=False)
+    walls = read_colours(bpy.data.objects["Left_Wall"].data)
+    assert walls.shape == (6, 3) and walls[:, 0].min() > walls[:, 1].max()
+
+    bpy.ops.image.open(filepath=str(png))
+    img = bpy.data.images[png.name]
+    assert tuple(img.size) == (512, 512)
+    px = np.empty(512 * 512 * img.channels, np.float32)
+    img.pixels.foreach_get(px)
+    rgb = px.reshape(512, 512, -1)[:, :, :3]
+    # Left third is the red wall (red dominant), right third the green wall (green dominant).
+    left, right = rgb[200:300, 20:80].mean((0, 1)), rgb[200:300, 440:490].mean((0, 1))
+    assert left[0] > 1.5 * left[1] and right[1] > 1.2 * right[0]
+
+
+def test_same_bake_as_the_operator_and_defaults_from_the_file(package, tmp_path):
+    src, out = tmp_path / "scene.blend", tmp_path / "out.blend"
+    save_scene(src, patch_size=0.7)
+    proc = run_batch(src, "--output", out, "--report", tmp_path / "r.json")
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads((tmp_path / "r.json").read_text())["settings"]["patch_size"] == \
+        pytest.approx(0.7)
+    bpy.ops.wm.open_mainfile(filepath=str(out), load_ui=False)
+    batch = read_colours(bpy.data.objects["Floor"].data)
+    bpy.ops.wm.open_mainfile(filepath=str(src), load_ui=False)
+    assert bpy.ops.radiosity.bake() == {"FINISHED"}
+    np.testing.assert_array_equal(read_colours(bpy.data.objects["Floor"].data), batch)
+
+
+def test_in_place_overwrites_only_when_asked(package, tmp_path):
+    src = tmp_path / "scene.blend"
+    save_scene(src)
+    line = one_error_line(run_batch(src, "--output", src))
+    assert "--in-place" in line
+    digest = sha256(src)
+    proc = run_batch(src, "--in-place")
+    assert proc.returncode == 0, proc.stderr
+    assert sha256(src) != digest
+    assert sorted(os.listdir(tmp_path)) == ["scene.blend"]  # no temporary or backup left
+    bpy.ops.wm.open_mainfile(filepath=str(src), load_ui=False)
+    assert "Radiosity" in bpy.data.objects["Floor"].data.color_attributes
+
+
+@pytest.mark.parametrize("args, expect", [
+    (["--method", "magic"], "bad option"),
+    (["--patch-size", "-1"], "bad option"),
+    (["--resolution", "abc"], "bad option"),
+    (["--frobnicate"], "bad option"),
+    (["--resolution", "33"], "resolution"),
+    ([], "--output"),
+])
+def test_bad_options_exit_non_zero_with_one_line(package, tmp_path, args, expect):
+    src = tmp_path / "scene.blend"
+    save_scene(src)
+    digest = sha256(src)
+    out = ["--output", tmp_path / "o.blend"] if args else []
+    line = one_error_line(run_batch(src, *out, *args))
+    assert expect in line
+    assert sha256(src) == digest and not (tmp_path / "o.blend").exists()
+
+
+@pytest.mark.parametrize("case, expect", [
+    ("missing", "not found"), ("no meshes", "Nothing to bake"), ("no light", "No light"),
+])
+def test_scene_errors_exit_non_zero_with_one_line(package, tmp_path, case, expect):
+    src = tmp_path / "scene.blend"
+    if case != "missing":
+        save_scene(src, meshes=case != "no meshes", light=case != "no light")
+    line = one_error_line(run_batch(src, "--output", tmp_path / "o.blend"))
+    assert expect in line
+    assert not (tmp_path / "o.blend").exists()
+
+
+def test_render_needs_a_camera(package, tmp_path):
+    src = tmp_path / "scene.blend"
+    save_scene(src)
+    line = one_error_line(run_batch(src, "--output", tmp_path / "o.blend", "--render",
+                                    tmp_path / "x.png"))
+    assert "camera" in line
