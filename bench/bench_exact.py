@@ -157,12 +157,15 @@ def main():
             ("exact 3x3 source, rays=16", lambda: exact_rows(small, src, source_order=3)),
             ("exact adaptive, rays=16",
              lambda: exact_rows(small, src, source_order="adaptive")),
-            ("hybrid R=64 near=4", lambda: hybrid_rows(small, src))):
+            ("hybrid R=64 near=4", lambda: hybrid_rows(small, src)),
+            ("hybrid, conserve=False", lambda: hybrid_rows(small, src, conserve=False)),
+            ("hybrid R=128 near=4", lambda: hybrid_rows(small, src, resolution=128))):
         t0 = time.process_time()
         rows = fn()
         t = time.process_time() - t0
         err = np.abs(rows - ref).sum(axis=1)
-        print(f"{name:28s} mean L1 {err.mean():.4f}  max L1 {err.max():.4f}  ({t:.2f} s)")
+        print(f"{name:28s} mean L1 {err.mean():.4f}  max L1 {err.max():.4f}  "
+              f"max |row sum - 1| {np.abs(rows.sum(axis=1) - 1).max():.4f}  ({t:.2f} s)")
 
 
 if __name__ == "__main__":

@@ -6,10 +6,13 @@ one sort per level for all nodes of that level) and traversed as a *wavefront*: 
 nodes expand into (ray, triangle) pairs that are intersected at once with Moller-Trumbore. Python
 loops run over tree levels and ray chunks only, never over rays, nodes or triangles.
 
-Hit convention: a ray ``o + t d`` hits a triangle at ``0 < t < t_max`` (strict at both ends, as a
-shadow ray to a light at ``t_max`` must not count the light). Barycentric bounds are inclusive with a
-tiny tolerance so that a ray through a shared edge hits both triangles and never leaks through;
-ties in ``t`` go to the lowest triangle index, so results are deterministic.
+Hit convention: a ray ``o + t d`` hits a triangle at ``0 < t < t_max`` (strict at both ends, as
+a shadow ray to a light at ``t_max`` must not count the light). Barycentric bounds are inclusive
+with a tiny tolerance so that a ray through a shared edge hits both triangles and never leaks
+through; ties in ``t`` go to the lowest triangle index, so results are deterministic.
+
+Throughput (bench/bench_exact.py, one core, 3932 triangles of room_with_boxes(2000)): build
+~8 ms; 50-65k rays/s (15-20 us per ray) for closest and any hit alike.
 """
 
 from dataclasses import dataclass
@@ -228,7 +231,8 @@ def _check_rays(bvh, origins, directions, t_max):
         raise ValueError("directions must be finite; got NaN or inf")
     dn = np.linalg.norm(d, axis=1)
     if np.any(dn == 0.0):
-        raise ValueError(f"directions must be non-zero; row {int(np.flatnonzero(dn == 0)[0])} is zero")
+        bad = int(np.flatnonzero(dn == 0)[0])
+        raise ValueError(f"directions must be non-zero; row {bad} is zero")
     tm = np.asarray(t_max, dtype=np.float64)
     if tm.ndim == 0:
         tm = np.full(o.shape[0], float(tm))

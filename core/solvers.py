@@ -33,8 +33,10 @@ from .progress import SILENT
 MATVEC_CHUNK_ROWS = 512
 
 #: Rows per diagonal block of block Gauss-Seidel. Each block is solved exactly (its inverse is
-#: kept: 3 x N x block doubles); larger blocks converge a little faster and cost more memory.
-GS_BLOCK_ROWS = 256
+#: kept: 3 x N x block doubles). Measured on room_with_boxes(2000) (2148 nodes, tol 1e-4):
+#: blocks of 1 (point GS), 16, 32, 64, 128 and 256 rows all take 14 sweeps; 64 was the fastest
+#: (0.11 s; point GS 5.8 s, 256 rows 1.0 s: the batched block inverses dominate).
+GS_BLOCK_ROWS = 64
 
 #: Default number of shooters per row request of progressive refinement: enough to amortise the
 #: row computation (one hemicube per shooter, computed in one vectorised batch).
@@ -309,10 +311,13 @@ def solve_gauss_seidel(F, rho, le, *, tol=DEFAULT_TOLERANCE, max_iterations=DEFA
     while it < max_iterations:
         change = 0.0
         for (s, e), inv in zip(bounds, inverses):
-            gathered = F[s:e, :s].astype(np.float64, copy=False) @ L[:s]
-            gathered += F[s:e, e:].astype(np.float64, copy=False) @ L[e:]
+            # One contiguous slab product, then remove the block's own part: F >= 0 and L >= 0,
+            # so the subtraction loses no significant digits (no cancellation of signs).
+            slab = F[s:e].astype(np.float64, copy=False)
+            gathered = slab @ L
+            gathered -= slab[:, s:e] @ L[s:e]
             rhs = le[s:e] + rho[s:e] * gathered        # (b, 3)
-            new = np.einsum("cij,jc->ic", inv, rhs)
+            new = np.matmul(inv, rhs.T[:, :, None])[:, :, 0].T
             change = max(change, float(np.abs(new - L[s:e]).max()))
             L[s:e] = new
             if monitor.due():

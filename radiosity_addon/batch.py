@@ -214,8 +214,7 @@ if __name__ == "__main__":
     _code = _batch.main(sys.argv)
     sys.stdout.flush()
     sys.stderr.flush()
-    # os._exit: inside the blender executable a SystemExit from a --python script would be
-    # reported but not always turned into the process's exit status.
-    if "--" in sys.argv:
-        os._exit(_code)
-    sys.exit(_code)
+    # os._exit: inside the blender executable a SystemExit from a --python script is not turned
+    # into the process's status, and the bpy 4.2 module can crash while the interpreter shuts
+    # down (exit status -11 after a successful bake). Every output is complete and renamed by now.
+    os._exit(_code)

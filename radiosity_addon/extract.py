@@ -177,8 +177,7 @@ def extract(depsgraph, *, selected_only=False):
         if obj.type == "LIGHT":
             if obj.original.hide_render:
                 continue
-            _add_light(inst, unit, out, add_faces, material_index, object_names, rho, le,
-                       mat_keys)
+            _add_light(inst, unit, out, add_faces, object_names, rho, le, mat_keys)
             continue
         if not _is_visible(inst, view_layer, selected_only):
             continue
@@ -231,25 +230,22 @@ def extract(depsgraph, *, selected_only=False):
             face_materials=np.concatenate(face_mats), reflectance=np.array(rho),
             emission=np.array(le), face_objects=np.concatenate(face_objs),
             object_names=tuple(object_names),
-            material_names=tuple("(none)" if k is None else k for k in mat_keys))
+            material_names=tuple(_material_name(k) for k in mat_keys))
     return out
 
 
-def _add_light(inst, unit, out, add_faces, material_index, object_names, rho, le, mat_keys):
+def _add_light(inst, unit, out, add_faces, object_names, rho, le, mat_keys):
     light = inst.object.data
     if light.type != "AREA":
         return  # reported by _light_warnings
-    local, _ = area_light_polygon(light)
-    matrix = unit @ np.array(inst.matrix_world, dtype=np.float64)
+    local, local_area = area_light_polygon(light)
     raw = np.array(inst.matrix_world, dtype=np.float64)
-    pts = transform(local, matrix)
-    raw_pts = transform(local, raw)
-    # Cycles normalises by the light's area in Blender units (measured; unit scale is display).
+    pts = transform(local, unit @ raw)
+    # Cycles divides the power by the light's area in Blender units (object scale included, unit
+    # scale not: it only relabels lengths) -- measured, see tests/addon/test_lights.py.
+    stretch = np.linalg.norm(np.cross(raw[:3, 0], raw[:3, 1]))
+    radiance = area_light_radiance(light, local_area * stretch)
     k = local.shape[0]
-    area_bu = 0.5 * np.linalg.norm(np.cross(raw_pts - raw_pts.mean(0),
-                                            np.roll(raw_pts, -1, 0) - raw_pts.mean(0)).sum(0))
-    true_area_bu = area_bu * _true_over_polygon(light, local)
-    radiance = area_light_radiance(light, true_area_bu)
     size = float(np.linalg.norm(pts.max(0) - pts.min(0)))
     normal = np.cross(pts[1] - pts[0], pts[2] - pts[0])
     normal /= np.linalg.norm(normal)
@@ -266,19 +262,18 @@ def _add_light(inst, unit, out, add_faces, material_index, object_names, rho, le
         le.append(np.zeros(3))
     obj_index = len(object_names)
     object_names.append(f"{name} (area light)")
-    verts = np.concatenate([pts, cover])
-    cv = np.arange(2 * k, dtype=np.int64)
-    add_faces(verts, cv, np.array([0, k]), np.array([k, k]),
+    add_faces(np.concatenate([pts, cover]), np.arange(2 * k, dtype=np.int64),
+              np.array([0, k]), np.array([k, k]),
               np.array([mat_keys[emit_key], mat_keys[black_key]]), obj_index)
     out.lights += 1
 
 
-def _true_over_polygon(light, local):
-    """Ratio of the light's true area to its polygon's (1 for rectangles)."""
-    _, true_area = area_light_polygon(light)
-    p = local - local.mean(0)
-    poly = 0.5 * abs(np.cross(p, np.roll(p, -1, 0))[:, 2].sum())
-    return true_area / poly if poly > 0 else 1.0
+def _material_name(key):
+    if key is None:
+        return "(no material)"
+    if isinstance(key, tuple):  # ("light", object name, n) or ("light cover",)
+        return f"{key[0]}: {key[1]}" if len(key) > 1 else key[0]
+    return key
 
 
 def _names(names, limit=5):

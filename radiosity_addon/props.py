@@ -8,7 +8,7 @@ from ..core.constants import DEFAULT_MAX_ITERATIONS, DEFAULT_TOLERANCE
 METHODS = [
     ("HEMICUBE", "Hemicube", "Cohen-Greenberg hemicube: fast, approximate for near patches"),
     ("EXACT", "Exact", "Contour-integral form factors with ray-traced visibility: slow, accurate"),
-    ("HYBRID", "Hybrid", "Hemicube, with near patch pairs computed exactly"),
+    ("HYBRID", "Hybrid", "Hemicube, with near patch pairs computed exactly (default: the best accuracy for the time)"),
 ]
 SOLVERS = [
     ("AUTO", "Auto", "Pick the solver from the scene size and memory budget"),
@@ -31,7 +31,7 @@ class RadiositySettings(bpy.types.PropertyGroup):
     patch_size: FloatProperty(
         name="Patch Size", description="Largest patch edge; smaller is finer and slower",
         default=0.5, min=1e-4, soft_min=0.01, soft_max=5.0, subtype="DISTANCE", unit="LENGTH")
-    method: EnumProperty(name="Form Factors", items=METHODS, default="HEMICUBE")
+    method: EnumProperty(name="Form Factors", items=METHODS, default="HYBRID")
     resolution: IntProperty(name="Hemicube Resolution", description="Pixels across a hemicube face",
                             default=64, min=8, max=1024)
     solver: EnumProperty(name="Solver", items=SOLVERS, default="AUTO")

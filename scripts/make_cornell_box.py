@@ -1,8 +1,9 @@
 """Write sample_blends/cornell_box.blend: the published Cornell box, ready to bake.
 
-Run from the repository with the bpy module::
+Run from the repository with the bpy module of the OLDEST supported Blender (4.2 LTS), because
+Blender 5 writes .blend files that Blender 4.x cannot read, while 5.x reads 4.2's::
 
-    .venv/bin/python scripts/make_cornell_box.py [--output sample_blends/cornell_box.blend]
+    .venv-bpy42/bin/python scripts/make_cornell_box.py [--output sample_blends/cornell_box.blend]
 
 Geometry, reflectances and the light's colour come from core.samples (one source of truth with the
 core's tests), which follows ../shared/reference/cornell_box.md: y and z swapped with handedness
@@ -26,8 +27,13 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 LIGHT_STRENGTH = 50.0
 
 #: Bake settings stored in the file (the batch script's defaults for it): 5 cm patches make
-#: ~2000 patches, a bake of seconds.
+#: ~1300 patches, a bake of seconds.
 PATCH_SIZE = 0.05
+
+#: Vertex colours live on mesh corners, so a wall of four vertices can only show a gradient. The
+#: surfaces are therefore modelled as grids of this spacing (the patch size): every patch corner is
+#: a mesh vertex and the bake's shadows and colour bleeding show. The light stays one quad.
+GRID = PATCH_SIZE
 
 
 def _load_package():
@@ -67,12 +73,11 @@ def build(pkg):
     for name, pts, mat in samples.cornell_geometry():
         groups.setdefault(name, []).append((np.asarray(pts), mat))
     for name, polys in groups.items():
-        verts, faces = [], []
-        for pts, _ in polys:
-            faces.append(tuple(range(len(verts), len(verts) + len(pts))))
-            verts.extend(map(tuple, pts))
+        grid = None if polys[0][1] == "light" else GRID
+        n = max(_divisions(pts, grid) for pts, _ in polys)
+        verts, faces = _merge([_grid(pts, n) for pts, _ in polys])
         mesh = bpy.data.meshes.new(name)
-        mesh.from_pydata(verts, [], faces)
+        mesh.from_pydata(verts.tolist(), [], faces)
         mesh.update()
         mesh.materials.append(mats[polys[0][1]])
         obj = bpy.data.objects.new(name.title().replace(" ", "_"), mesh)
@@ -93,6 +98,62 @@ def build(pkg):
     scene.unit_settings.system = "METRIC"
     scene.radiosity.patch_size = PATCH_SIZE
     return scene
+
+
+def _divisions(pts, grid):
+    """Grid divisions along the longest edge of a polygon (1: keep it whole)."""
+    import numpy as np
+
+    if grid is None:
+        return 1
+    edges = np.linalg.norm(np.roll(pts, -1, axis=0) - pts, axis=1)
+    return max(1, int(np.ceil(edges.max() / grid - 1e-9)))
+
+
+def _grid(pts, n):
+    """Split a quad (bilinear n x n grid) or a triangle (n^2 triangles) keeping its winding.
+
+    Returns (points (k, 3), faces: list of index tuples into points).
+    """
+    import numpy as np
+
+    t = np.linspace(0.0, 1.0, n + 1)
+    if len(pts) == 4:
+        u, v = np.meshgrid(t, t, indexing="ij")
+        u, v = u.ravel()[:, None], v.ravel()[:, None]
+        p = ((1 - u) * (1 - v) * pts[0] + u * (1 - v) * pts[1] + u * v * pts[2]
+             + (1 - u) * v * pts[3])
+        idx = lambda i, j: i * (n + 1) + j  # noqa: E731
+        faces = [(idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1))
+                 for i in range(n) for j in range(n)]
+        return p, faces
+    index, p = {}, []
+    for i in range(n + 1):
+        for j in range(n + 1 - i):
+            index[i, j] = len(p)
+            a, b = i / n, j / n
+            p.append(pts[0] + a * (pts[1] - pts[0]) + b * (pts[2] - pts[0]))
+    faces = []
+    for i in range(n):
+        for j in range(n - i):
+            faces.append((index[i, j], index[i + 1, j], index[i, j + 1]))
+            if i + j < n - 1:
+                faces.append((index[i + 1, j], index[i + 1, j + 1], index[i, j + 1]))
+    return np.array(p), faces
+
+
+def _merge(pieces):
+    """Join grids into one connected mesh: coincident points (to 1 micrometre) become one."""
+    import numpy as np
+
+    points = np.concatenate([p for p, _ in pieces])
+    offsets = np.cumsum([0] + [len(p) for p, _ in pieces])
+    key = np.round(points * 1e6).astype(np.int64)
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.ravel()
+    faces = [tuple(int(inverse[o + k]) for k in f) for (_, fs), o in zip(pieces, offsets)
+             for f in fs]
+    return points[first], faces
 
 
 def main(argv=None):

@@ -31,7 +31,7 @@ SCENES = ("office", "apartment", "cornell_box")
 
 FIELDS = ["scene", "engine", "label", "method", "solver", "patch_size", "resolution", "samples", "seed",
           "patches", "t_patches", "t_form_factors", "t_solve", "t_colours", "t_total",
-          "peak_mb", "rms", "p95", "bias", "faces"]
+          "peak_mb", "rms", "p95", "bias", "faces", "rms_patch", "p95_patch"]
 
 
 def our_sweep(face_size, args):
@@ -164,6 +164,17 @@ def run_scene(name, blend, args, rng):
                    patches=res.report["patches"], t_patches=tm.get("patches"),
                    t_form_factors=tm.get("form_factors"), t_solve=tm.get("solve"),
                    t_colours=tm.get("colours"), t_total=wall, peak_mb=peak)
+        # Diagnostic: the same error with our per-face value taken from the patches (area mean of
+        # the face's patches) instead of the mean of corner colours, which average patches of
+        # neighbouring faces: separates solver/form-factor error from corner interpolation.
+        pf = res.patches.face
+        pa = res.patches.areas
+        fm = np.stack([np.bincount(pf, weights=pa * res.patch_radiance[:, k], minlength=F)
+                       for k in range(3)], axis=1)
+        fa = np.bincount(pf, weights=pa, minlength=F)
+        fm = fm / np.where(fa > 0, fa, 1.0)[:, None]
+        e = metrics.relative_errors(fm, ref_faces, area, keep & (fa > 0))
+        row.update(rms_patch=e["rms"], p95_patch=e["p95"])
         record(row, res.corner_colours)
         if best is None or row["rms"] < best[0]["rms"]:
             best = (row, res.corner_colours)

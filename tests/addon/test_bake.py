@@ -146,7 +146,7 @@ def test_extraction_applies_world_transform_and_unit_scale(package):
 
 def test_cornell_box_through_operator(package):
     bpy.ops.wm.open_mainfile(filepath=CORNELL, load_ui=False)
-    report = bake_ok(patch_size=0.2, resolution=32)
+    report = bake_ok(patch_size=0.2, resolution=16)
     meshes = [o for o in bpy.context.scene.objects if o.type == "MESH"]
     assert len(meshes) == 8 and report["objects"] == 8
     mean = {o.name: read_colours(o.data).mean(axis=0) for o in meshes}
@@ -158,7 +158,7 @@ def test_cornell_box_through_operator(package):
                        .inputs["Emission Color"].default_value[:3]) * 50.0
     assert np.all(light >= emitted - 1e-4)  # own emission + what the ceiling sends back
     assert report["energy"]["emitted"] > 0 and report["energy"]["absorbed"] > 0
-    assert report["warnings"] == []
+    assert report["notes"] == []  # every material read exactly (no texture or node guesses)
 
 
 def _corner_keys(obj):
@@ -224,25 +224,31 @@ def test_topology_modifiers_write_what_the_user_sees(package, kind):
                                    atol=2 * write.CORNER_INSET * spread + 1e-5)
 
 
-def test_catmull_clark_cube_gets_smooth_lighting_of_the_limit_surface(package):
-    # Catmull-Clark moves the vertices: the written colours must lie within the colours the
-    # evaluated surface has on the same side (top corners lit, bottom corners dark).
+def test_catmull_clark_corners_sample_their_own_face_of_the_limit_surface(package):
+    # Catmull-Clark moves every vertex, so no corner of the evaluated mesh sits where an original
+    # corner is. Oracle: a field whose value is the evaluated position itself (colour = x, y, z
+    # of each evaluated corner). Mapped onto an original corner it must give a point of the
+    # evaluated surface on that corner's face (beyond the cube's centre along the face normal)
+    # and in that corner's octant (the same signs as the original vertex).
+    extract_mod = PACKAGE.radiosity_addon.extract
     v, f = box(0.6, inward=False)
-    cube = mesh_object("Cube", v, f, material("grey", (0.5, 0.5, 0.5)))
-    mod = cube.modifiers.new("s", "SUBSURF")
-    mod.levels = 2
-    lv, lf = square(2.0, z=1.5, down=True)
-    mesh_object("Lamp", lv, lf, material("lamp", (0, 0, 0), emission=(1, 1, 1), strength=2.0,
-                                         kind="emission"))
-    gv, gf = square(4.0, z=-0.3)
-    mesh_object("Ground", gv, gf, material("g", (0.5, 0.5, 0.5)))
-    bake_ok(patch_size=0.2, resolution=32, solver="DIRECT")
-    got = read_colours(cube.data)
-    assert got.shape == (24, 3)
-    pos, normals = _corner_keys(cube)
-    top, bottom = normals[:, 2] > 0.9, normals[:, 2] < -0.9
-    assert got[top].min() > got[bottom].max()
-    assert np.all(np.isfinite(got)) and got.min() > 0
+    cube = mesh_object("Cube", v, f)
+    cube.modifiers.new("s", "SUBSURF").levels = 2
+    cube.location = (1.0, 2.0, 3.0)
+    part = extract_mod.extract(bpy.context.evaluated_depsgraph_get()).parts[0]
+    assert part.face_starts.size == 96
+    field = part.world_vertices[part.corner_verts] - [1.0, 2.0, 3.0]
+    layout = extract_mod.read_mesh_layout(cube.data)
+    got = write.map_to_original(part, field, layout)
+    verts, cv, fs, fz, _ = layout
+    normals = np.array([p.normal for p in cube.data.polygons])[np.repeat(np.arange(6), fz)]
+    corner = verts[cv]
+    assert np.all(np.einsum("ij,ij->i", got, normals) > 0.15)   # limit surface: |x| up to 0.25
+    assert np.all(np.sign(got) == np.sign(corner))
+    # On the evaluated surface: as far from the centre as the evaluated vertices go, no farther.
+    radius = np.linalg.norm(got, axis=1)
+    ev_radius = np.linalg.norm(part.world_vertices - [1.0, 2.0, 3.0], axis=1)
+    assert ev_radius.min() - 1e-6 <= radius.min() and radius.max() <= ev_radius.max() + 1e-6
 
 
 def test_instances_light_the_scene_but_receive_nothing(package):
@@ -367,6 +373,8 @@ def test_area_lights_match_an_emitting_polygon_of_the_converted_radiance(package
     bpy.context.scene.collection.objects.link(lamp_obj)
     report = bake_ok(patch_size=0.25, resolution=64, solver="DIRECT")
     assert report["area_lights"] == 1
+    ext = PACKAGE.radiosity_addon.extract.extract(bpy.context.evaluated_depsgraph_get())
+    assert ext.arrays["material_names"] == ("grey", "light: Panel", "light cover")
     from_light = read_colours(floor.data)
 
     bpy.data.objects.remove(lamp_obj)
@@ -494,3 +502,33 @@ def test_bad_setting_and_edit_mode_are_reported(package):
     set_settings(bpy.context.scene, resolution=33)  # the core wants an even resolution
     with pytest.raises(RuntimeError, match="resolution"):
         bpy.ops.radiosity.bake()
+
+
+class _Layout:
+    """Records what a panel draws (bpy layouts cannot be made outside a UI redraw)."""
+
+    def __init__(self, log):
+        self.log = log
+
+    def __getattr__(self, name):
+        if name in ("column", "row", "box"):
+            return lambda *a, **k: self
+        if name in ("prop", "operator", "label"):
+            return lambda *a, **k: self.log.append((name, a, k)) or self
+        raise AttributeError(name)
+
+
+def test_panel_draws_every_setting_the_button_and_the_summary(package):
+    light_over_floor()
+    bake_ok(patch_size=0.5, resolution=16)
+    log = []
+    panel = type("P", (), {"layout": _Layout(log)})()
+    PACKAGE.radiosity_addon.panels.VIEW3D_PT_radiosity.draw(panel, bpy.context)
+    props = [a[1] for kind, a, _ in log if kind == "prop"]
+    for name in ("patch_size", "method", "resolution", "solver", "tolerance", "max_iterations",
+                 "selected_only", "make_single_user", "show_bake", "exposure"):
+        assert name in props
+    assert ("operator", ("radiosity.bake",), {"icon": "LIGHT_AREA"}) in log
+    labels = [k.get("text", "") for kind, a, k in log if kind == "label"]
+    assert any(t.startswith("Patches: ") for t in labels)
+    assert any(t.startswith("Iterations: ") for t in labels)

@@ -17,8 +17,9 @@ from helpers import material, mesh_object, read_colours, square
 BATCH = os.path.join(ROOT, "radiosity_addon", "batch.py")
 CORNELL = os.path.join(ROOT, "sample_blends", "cornell_box.blend")
 
-#: Patch size for batch bakes of the Cornell box in tests: ~100 patches, a bake of a second.
-FAST = ["--patch-size", "0.2", "--resolution", "32"]
+#: Settings for batch bakes of the Cornell box in tests: its surfaces are 5 cm grids, so the patch
+#: size changes nothing below 5 cm; a coarse hemicube keeps the bake to a few seconds.
+FAST = ["--patch-size", "0.2", "--resolution", "16"]
 
 
 def run_batch(*args, timeout=240):
@@ -66,11 +67,12 @@ def test_cornell_batch_bake_report_render_and_input_untouched(package, tmp_path)
     for key in ("settings", "patches", "timings", "iterations", "residual", "energy", "warnings"):
         assert key in data
     assert data["settings"]["patch_size"] == pytest.approx(0.2)
-    assert data["settings"]["resolution"] == 32
+    assert data["settings"]["resolution"] == 16
 
     bpy.ops.wm.open_mainfile(filepath=str(out), load_ui=False)
-    walls = read_colours(bpy.data.objects["Left_Wall"].data)
-    assert walls.shape == (6, 3) and walls[:, 0].min() > walls[:, 1].max()
+    wall = bpy.data.objects["Left_Wall"].data
+    walls = read_colours(wall)
+    assert walls.shape == (len(wall.loops), 3) and np.all(walls[:, 0] > 2 * walls[:, 1])
 
     bpy.ops.image.open(filepath=str(png))
     img = bpy.data.images[png.name]

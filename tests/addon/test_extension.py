@@ -60,10 +60,15 @@ INSTALL_SCRIPT = textwrap.dedent("""
     # A bake through the installed copy: a closed furnace box, L = Le / (1 - rho) = 2.
     bpy.ops.wm.read_homefile(use_factory_startup=True, use_empty=True)
     assert bpy.context.preferences.addons.get(mods[0]) is not None
-    bpy.ops.mesh.primitive_cube_add()
-    cube = bpy.context.object
+    verts = [(x, y, z) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]
+    faces = [(2, 3, 1, 0), (5, 7, 6, 4), (1, 5, 4, 0), (6, 7, 3, 2), (4, 6, 2, 0), (3, 7, 5, 1)]
+    mesh = bpy.data.meshes.new("box")          # faces wound inward: the inside is the front
+    mesh.from_pydata(verts, [], faces)
+    cube = bpy.data.objects.new("box", mesh)
+    bpy.context.scene.collection.objects.link(cube)
     mat = bpy.data.materials.new("m")
-    mat.use_nodes = True
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
     bsdf = mat.node_tree.nodes["Principled BSDF"]
     bsdf.inputs["Base Color"].default_value = (0.5, 0.5, 0.5, 1)
     bsdf.inputs["Emission Color"].default_value = (1, 1, 1, 1)
@@ -93,11 +98,14 @@ def test_zip_installs_registers_and_bakes(built_zip, tmp_path):
 
 
 def _registered_state():
+    addon = PACKAGE.radiosity_addon
+    classes = addon.props.CLASSES + addon.operators.CLASSES + addon.panels.CLASSES
     return (hasattr(bpy.types.Scene, "radiosity"),
             hasattr(bpy.types.WindowManager, "radiosity_progress"),
+            hasattr(bpy.types.WindowManager, "radiosity_status"),
             "bake" in dir(bpy.ops.radiosity),
-            hasattr(bpy.types, "VIEW3D_PT_radiosity"),
-            hasattr(bpy.types, "RadiositySettings"))
+            all(cls.is_registered for cls in classes),
+            any(cls.is_registered for cls in classes))
 
 
 def test_register_unregister_twice_leaves_nothing_behind():
@@ -105,12 +113,12 @@ def test_register_unregister_twice_leaves_nothing_behind():
     if was:  # the session's registration (other test modules) is restored at the end
         PACKAGE.unregister()
     try:
-        assert _registered_state() == (False,) * 5
+        assert _registered_state() == (False,) * 6
         for _ in range(2):
             PACKAGE.register()
-            assert _registered_state() == (True,) * 5
+            assert _registered_state() == (True,) * 6
             PACKAGE.unregister()
-            assert _registered_state() == (False,) * 5
+            assert _registered_state() == (False,) * 6
     finally:
         if was:
             PACKAGE.register()

@@ -232,6 +232,40 @@ def test_point_polygon_does_not_mutate_inputs():
         np.testing.assert_array_equal(a, b)
 
 
+def test_chunking_does_not_change_the_result(monkeypatch):
+    import core.exact as ex
+    rng = np.random.default_rng(13)
+    x, n, polys = rng.normal(size=(30, 3)), rng.normal(size=(30, 3)), rng.normal(size=(20, 4, 3))
+    whole = point_polygon_form_factor(x, n, polys)
+    monkeypatch.setattr(ex, "PAIR_CHUNK", 7)
+    np.testing.assert_array_equal(point_polygon_form_factor(x, n, polys), whole)
+
+
+def test_point_in_the_polygons_plane_sees_it_edge_on():
+    # Room corner: a point on the wall's corner or bottom edge lies in the wall's plane: F = 0
+    # exactly, whatever its own normal (the contour sum alone would give a partial winding
+    # angle on the boundary: 0.088 at the corner for the tilted normal). Just off the plane, at
+    # distance x from the bottom edge, the wall fills almost half the hemisphere: F -> 1/2
+    # (closed-form limit: a half-plane through the point), linearly in x (0.78 x measured).
+    wall = square([0, 0, 0], [0, 1, 0], [0, 0, 1])
+    for x in ([0.0, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 0.3, 0.4]):
+        for n in ([1.0, 0.0, 1.0], [0.0, 0.0, 1.0], [1.0, 0.2, 0.0]):
+            assert point_polygon_form_factor([x], [n], wall[None])[0, 0] == 0.0
+    near = point_polygon_form_factor([[1e-7, 0.5, 0.0], [1e-9, 0.5, 0.0]], [[0, 0, 1.0]] * 2,
+                                     wall[None])[:, 0]
+    np.testing.assert_allclose(near, 0.5, atol=1e-6)
+    assert np.all(near < 0.5)
+
+
+def test_exact_and_hybrid_rows_do_not_mutate_patches():
+    pat = blocked_pair(0.5)
+    before = {k: np.array(v, copy=True) for k, v in vars(pat).items()}
+    exact_rows(pat, [0, 1, 3], source_order="adaptive")
+    hybrid_rows(pat, [0, 1, 3], resolution=16)
+    for k, v in before.items():
+        np.testing.assert_array_equal(getattr(pat, k), v)
+
+
 # ----------------------------------------------------------------------------- visibility
 def blocked_pair(blocker_width, flip_target=False):
     src = square([0, 0, 0], [1, 0, 0], [0, 1, 0])                       # up
@@ -359,6 +393,27 @@ def test_hybrid_replaces_near_pairs_with_area_averaged_values():
     assert plain[0, 1] > 1.15 * F_OPPOSITE                         # the +20% proximity error
 
 
+def test_hybrid_keeps_the_hemicube_row_sums_in_the_room():
+    # Sum rule: conserve=True rescales far entries so each row sums like the hemicube's row
+    # (identity to rounding). The ceiling patches over the luminaire (5 cm gap) are the case
+    # where plain replacement overshoots: their rows exceed 1 without it.
+    from core.hemicube import hemicube_rows
+    from core.patches import make_patches
+    from core.samples import room_with_boxes
+
+    pat = make_patches(room_with_boxes(300), 10.0)
+    panel_centre = pat.centres[pat.material == 4].mean(axis=0)
+    near_panel = np.linalg.norm(pat.centres[:, :2] - panel_centre[:2], axis=1) < 0.8
+    ceiling = np.flatnonzero((pat.centres[:, 2] > 2.99) & near_panel)
+    src = np.concatenate([ceiling, [0, 50, 100]])
+    hemi = hemicube_rows(pat, src, resolution=64)
+    rows = hybrid_rows(pat, src, resolution=64)
+    np.testing.assert_allclose(rows.sum(axis=1), hemi.sum(axis=1), atol=1e-12)
+    raw = hybrid_rows(pat, src, resolution=64, conserve=False)
+    assert raw.sum(axis=1).max() > 1.05
+    assert np.all(rows >= 0)
+
+
 # ----------------------------------------------------------------------------- invalid input
 @pytest.fixture
 def pat():
@@ -429,6 +484,11 @@ def test_patches_type(pat):
 def test_source_order_must_be_positive(pat):
     with pytest.raises(ValueError, match="source_order must be an integer >= 1 or 'adaptive'"):
         exact_rows(pat, [0], source_order=0)
+
+
+def test_conserve_must_be_bool(pat):
+    with pytest.raises(TypeError, match="conserve must be a bool"):
+        hybrid_rows(pat, [0], conserve="yes")
 
 
 def test_near_must_be_non_negative(pat):

@@ -300,7 +300,8 @@ def test_validation_messages(room):
         solve_direct(F[:, :-1], rho, le)
     with pytest.raises(TypeError, match="F must be float32 or float64; got int64"):
         solve_jacobi(F.astype(np.int64), rho, le)
-    with pytest.raises(ValueError, match=rf"rho must have shape \(N, 3\) = \({n}, 3\); got \({n}, 2\)"):
+    with pytest.raises(ValueError,
+                       match=rf"rho must have shape \(N, 3\) = \({n}, 3\); got \({n}, 2\)"):
         solve_gauss_seidel(F, rho[:, :2], le)
     with pytest.raises(ValueError, match=r"le must have shape"):
         solve_direct(F, rho, le[:-1])

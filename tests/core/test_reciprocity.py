@@ -1,0 +1,143 @@
+"""Reciprocity correction and the near-field failure of point-source form factors.
+
+A luminaire hung a few centimetres below a ceiling is where the hemicube breaks: the ceiling
+patches above it see the luminaire's back (two-sided emitters, as in Cycles) from their centres
+only, and ``A_i F_ij != A_j F_ji`` by tens of percent. Gathering with such rows destroys energy.
+"""
+
+import importlib
+
+import numpy as np
+import pytest
+
+from core import BakeSettings, bake, scene_from_polygons
+
+bake_module = importlib.import_module("core.bake")
+make_reciprocal = bake_module.make_reciprocal
+
+
+def _rectangle(x0, x1, y0, y1, z, down):
+    pts = [[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]]
+    return pts[::-1] if down else pts
+
+
+def _box_with_hung_panel(gap=0.03, size=2.0, panel=0.6):
+    """Closed cube (normals inward) with a square panel ``gap`` below the ceiling, facing down."""
+    s = size
+    quads = [
+        _rectangle(0, s, 0, s, 0.0, down=False),           # floor
+        _rectangle(0, s, 0, s, s, down=True),              # ceiling
+        [[0, 0, 0], [0, s, 0], [0, s, s], [0, 0, s]],      # x = 0, normal +x
+        [[s, 0, 0], [s, 0, s], [s, s, s], [s, s, 0]],      # x = s, normal -x
+        [[0, 0, 0], [0, 0, s], [s, 0, s], [s, 0, 0]],      # y = 0, normal +y
+        [[0, s, 0], [s, s, 0], [s, s, s], [0, s, s]],      # y = s, normal -y
+    ]
+    c0, c1 = 0.5 * (s - panel), 0.5 * (s + panel)
+    quads.append(_rectangle(c0, c1, c0, c1, s - gap, down=True))
+    verts = np.array([p for q in quads for p in q], dtype=float)
+    polys = [list(range(4 * i, 4 * i + 4)) for i in range(len(quads))]
+    mats = [0] * 6 + [1]
+    return scene_from_polygons(verts, polys, mats, [[0.7] * 3, [0.8] * 3],
+                               [[0.0] * 3, [10.0] * 3])
+
+
+def _random_rows(n, rng):
+    F = rng.random((n, n)) * (rng.random((n, n)) < 0.5)
+    np.fill_diagonal(F, 0.0)
+    return F / F.sum(axis=1, keepdims=True) * rng.uniform(0.6, 1.0, size=(n, 1))
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_make_reciprocal_is_reciprocal_and_keeps_row_sums(dtype):
+    rng = np.random.default_rng(1)
+    F = _random_rows(60, rng).astype(dtype)
+    A = rng.uniform(0.1, 2.0, size=60)
+    out, info = make_reciprocal(F, A)
+    G = A[:, None] * out.astype(np.float64)
+    # float32 storage rounds each entry to ~6e-8 relative.
+    atol = 1e-12 if dtype == np.float64 else 1e-6
+    np.testing.assert_allclose(G, G.T, rtol=0, atol=atol * G.max())
+    np.testing.assert_allclose(out.sum(axis=1), F.sum(axis=1),
+                               rtol=bake_module.RECIPROCITY_TOL * 1.01 + atol)
+    assert out.dtype == dtype
+    assert info["asymmetry_before"] > 0.1
+    assert info["row_sum_error"] <= bake_module.RECIPROCITY_TOL
+
+
+def test_make_reciprocal_leaves_reciprocal_rows_alone():
+    # Inside a sphere F_ij = A_j / A_total for every i: reciprocal already, rows sum to 1.
+    rng = np.random.default_rng(2)
+    A = rng.uniform(0.5, 1.5, size=40)
+    F = np.tile(A / A.sum(), (40, 1))
+    out, info = make_reciprocal(F, A)
+    np.testing.assert_allclose(out, F, rtol=1e-9)
+    assert info["asymmetry_before"] < 1e-12
+
+
+def test_make_reciprocal_input_not_mutated():
+    rng = np.random.default_rng(3)
+    F = _random_rows(10, rng)
+    before = F.copy()
+    make_reciprocal(F, np.ones(10))
+    np.testing.assert_array_equal(F, before)
+
+
+@pytest.mark.parametrize("F, areas, message", [
+    (np.zeros((3, 2)), np.ones(3), r"F must be square \(n, n\); got \(3, 2\)"),
+    (np.zeros((3, 3)), np.ones(2), r"areas must have shape \(3,\) and be > 0; got \(2,\)"),
+    (np.zeros((3, 3)), np.array([1.0, 0.0, 1.0]), r"areas must have shape \(3,\) and be > 0"),
+])
+def test_make_reciprocal_refuses_bad_input(F, areas, message):
+    with pytest.raises(ValueError, match=message):
+        make_reciprocal(F, areas)
+
+
+@pytest.fixture(scope="module")
+def hung_panel():
+    return _box_with_hung_panel()
+
+
+@pytest.fixture(scope="module")
+def exact_reference(hung_panel):
+    # The exact method integrates over the source patch (adaptive Gauss) and the target contour:
+    # no point-source assumption anywhere.
+    return bake(hung_panel, BakeSettings(patch_size=0.5, method="exact", rays=16))
+
+
+def _balance(res):
+    e = res.report["energy"]
+    return e["balance"] / e["emitted"]
+
+
+def _error(res, ref):
+    """Area-weighted relative RMS error of the front patch radiance (emitters excluded)."""
+    A = res.patches.areas
+    lit = res.patches.material == 0
+    d = (res.patch_radiance - ref.patch_radiance)[lit]
+    return float(np.sqrt((A[lit, None] * d ** 2).sum() /
+                         (A[lit, None] * ref.patch_radiance[lit] ** 2).sum()))
+
+
+def test_where_the_hemicube_breaks_near_a_hung_panel(hung_panel, exact_reference):
+    # Raw hemicube rows: energy is destroyed (or created) by the non-reciprocal near pairs.
+    raw = bake(hung_panel, BakeSettings(patch_size=0.5, method="hemicube", reciprocity=False))
+    assert abs(_balance(raw)) > 0.05
+    assert any("energy balance off" in w for w in raw.report["warnings"])
+    assert raw.report["reciprocity"]["asymmetry_before"] > 0.1
+    # Made reciprocal (the hemicube default): the balance closes and the error shrinks.
+    fixed = bake(hung_panel, BakeSettings(patch_size=0.5, method="hemicube"))
+    assert abs(_balance(fixed)) < 1e-4
+    assert _error(fixed, exact_reference) < _error(raw, exact_reference)
+
+
+def test_hybrid_default_is_accurate_near_a_hung_panel(hung_panel, exact_reference):
+    # The default method computes near pairs exactly: energy balance within 2 % (measured
+    # -1.4 %: the far entries of a row are rescaled to keep its row sum, which is not exactly
+    # reciprocal) and within 5 % of the exact method overall (measured 1.8 %; far pairs keep
+    # the hemicube's R = 64 aliasing, a few % per pair at this patch size). The raw hemicube
+    # on the same scene: balance -138 %, error 207 %.
+    res = bake(hung_panel, BakeSettings(patch_size=0.5))
+    assert res.report["method"] == "hybrid"
+    assert abs(_balance(res)) < 0.02
+    assert _error(res, exact_reference) < 0.05
+    assert abs(_balance(exact_reference)) < 0.01
