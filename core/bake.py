@@ -392,8 +392,11 @@ class _RowStore:
         return out
 
 
-def _discover(store, rows_fn, allowed, start_active, frontier, monitor, budget, batcher):
+def _discover(store, rows_fn, allowed, start_active, frontier, monitor, budget, batcher,
+              expand=True):
     """Grow the active set wave by wave from ``frontier``; rows of new active nodes are stored.
+
+    With ``expand=False`` only the rows of ``frontier`` are computed: what they hit is not added.
 
     Returns (active (2P,) bool, overflow bool). ``overflow``: the store outgrew ``budget``
     and discovery stopped early.
@@ -411,9 +414,10 @@ def _discover(store, rows_fn, allowed, start_active, frontier, monitor, budget, 
             rows = batcher.timed(rows_fn, sources)
             hit = store.add(sources, rows)
             pos += len(sources)
-            new = hit[allowed[hit] & ~active[hit]]
-            active[new] = True
-            next_wave[new] = True
+            if expand:
+                new = hit[allowed[hit] & ~active[hit]]
+                active[new] = True
+                next_wave[new] = True
             done = int(np.count_nonzero(store.where[:, 0] >= 0))
             left = len(pending) - pos + int(np.count_nonzero(next_wave))
             best = max(best, done / (done + left))
@@ -581,15 +585,19 @@ def _run(scene, settings, patches, store, active, monitor, timings, t_start, war
     if store is None:
         store = _RowStore(N)
         active = np.zeros(N, dtype=bool)
-        # Every front node is solved: it is what the user sees and what gets baked, and a
-        # small patch can slip between the pixels of every hemicube that looks at it, so
-        # "hit by an active row" would leave it black. Back nodes are found by discovery.
-        frontier = np.union1d(emitting, np.arange(P, dtype=np.int64))
     else:
         store = store.copy()
-        frontier = emitting[~active[emitting]]
+    frontier = emitting[~active[emitting]]
     active, overflow = _discover(store, rows_fn, allowed, active, frontier, monitor,
                                  settings.memory_budget, batcher)
+    # Every front node is solved: it is what the user sees and what gets baked, and a small
+    # patch can slip between the pixels of every hemicube that looks at it, so "hit by an
+    # active row" alone would leave it black. What these late rows hit is not added: a node
+    # that only unlit nodes see (the inside of a box, seen from the floor under it) stays out.
+    late = np.flatnonzero(~active[:P])
+    if len(late) and not overflow:
+        active, overflow = _discover(store, rows_fn, allowed, active, late, monitor,
+                                     settings.memory_budget, batcher, expand=False)
     monitor.update(1.0, "form factors done")
     timings["form_factors"] = time.perf_counter() - t0
 

@@ -167,7 +167,6 @@ _CORNELL = {
     "floor": ([[552.8, 0, 0], [0, 0, 0], [0, 0, 559.2], [549.6, 0, 559.2]], "white"),
     "light": ([[343.0, 548.8, 227.0], [343.0, 548.8, 332.0], [213.0, 548.8, 332.0],
                [213.0, 548.8, 227.0]], "light"),
-    "ceiling": ([[556.0, 548.8, 0], [556.0, 548.8, 559.2], [0, 548.8, 559.2], [0, 548.8, 0]], "white"),
     "back wall": ([[549.6, 0, 559.2], [0, 0, 559.2], [0, 548.8, 559.2], [556.0, 548.8, 559.2]], "white"),
     "right wall": ([[0, 0, 559.2], [0, 0, 0], [0, 548.8, 0], [0, 548.8, 559.2]], "green"),
     "left wall": ([[552.8, 0, 0], [549.6, 0, 559.2], [556.0, 548.8, 559.2], [556.0, 548.8, 0]], "red"),
@@ -209,9 +208,11 @@ def cornell_geometry():
     """The Cornell box as (name, points (k, 3) metres in Blender axes, material name) polygons.
 
     Blender axes: X = x, Y = -z, Z = y (a rotation, so handedness is kept: the red wall stays on
-    the camera's left). Millimetres become metres. The light is lowered 1 mm below the ceiling so
-    the two do not coincide, and the non-planar red wall is split into two triangles. Every normal
-    points into the box (walls) or out of the block (blocks); the light faces down.
+    the camera's left). Millimetres become metres. The light sits in an opening of the ceiling,
+    as in the real box: the ceiling is the 3 x 3 grid of quads around the light's rectangle minus
+    its centre, so nothing coincides with the light and its back side (mesh lights emit from both
+    sides in Cycles) emits out of the box. The non-planar red wall is split into two triangles.
+    Every normal points into the box (walls) or out of the block (blocks); the light faces down.
     """
     def to_blender(p):
         p = np.asarray(p, dtype=np.float64) / 1000.0
@@ -232,7 +233,6 @@ def cornell_geometry():
     for name, (pts, mat) in _CORNELL.items():
         pts = to_blender(pts)
         if name == "light":
-            pts[:, 2] -= 0.001
             n = np.cross(pts[1] - pts[0], pts[2] - pts[0])
             polys.append((name, pts if n[2] < 0 else pts[::-1].copy(), mat))
         elif name == "left wall":
@@ -240,6 +240,15 @@ def cornell_geometry():
             add(name, pts[[0, 2, 3]], mat)
         else:
             add(name, pts, mat)
+    xs = [0.0, 213.0, 343.0, 556.0]
+    zs = [0.0, 227.0, 332.0, 559.2]
+    for i in range(3):
+        for k in range(3):
+            if i == 1 and k == 1:
+                continue  # the light's opening
+            cell = [[xs[i], 548.8, zs[k]], [xs[i + 1], 548.8, zs[k]],
+                    [xs[i + 1], 548.8, zs[k + 1]], [xs[i], 548.8, zs[k + 1]]]
+            add("ceiling", to_blender(cell), "white")
     for name, faces in _CORNELL_BLOCKS.items():
         block = to_blender(np.concatenate(faces))
         mid = 0.5 * (block.min(axis=0) + block.max(axis=0))

@@ -7,8 +7,9 @@ Blender 5 writes .blend files that Blender 4.x cannot read, while 5.x reads 4.2'
 
 Geometry, reflectances and the light's colour come from core.samples (one source of truth with the
 core's tests), which follows ../shared/reference/cornell_box.md: y and z swapped with handedness
-kept (Blender X = x, Y = -z, Z = y), millimetres to metres, the light lowered 1 mm under the
-ceiling, the non-planar red wall split into two triangles, reflectances averaged over the bands
+kept (Blender X = x, Y = -z, Z = y), millimetres to metres, the light in an opening of the
+ceiling (nothing coincides with it; its back side emits out of the box, as the real box's light
+does), the non-planar red wall split into two triangles, reflectances averaged over the bands
 R = 600-700, G = 500-596, B = 400-496 nm. The light is a Principled BSDF whose Emission Color is the
 band-averaged spectrum (normalised to 1) and whose strength is LIGHT_STRENGTH. The camera is the
 published one: at (278, 273, -800) mm looking along +z with +y up, 35 mm lens on a 25 mm film.
