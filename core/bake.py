@@ -437,8 +437,9 @@ def _node_arrays(scene, patches, two_sided):
     rho = np.asarray(scene.reflectance, dtype=np.float64)[patches.material]
     le = np.asarray(scene.emission, dtype=np.float64)[patches.material]
     if two_sided:
-        rho_n = np.concatenate([rho, rho])
-        le_n = np.concatenate([le, le])
+        back_rho, back_le = scene.back_materials()
+        rho_n = np.concatenate([rho, np.asarray(back_rho, dtype=np.float64)[patches.material]])
+        le_n = np.concatenate([le, np.asarray(back_le, dtype=np.float64)[patches.material]])
     else:
         rho_n = np.concatenate([rho, np.zeros_like(rho)])
         le_n = np.concatenate([le, np.zeros_like(le)])

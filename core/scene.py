@@ -39,6 +39,10 @@ class Scene:
     face_areas : (F,) float64
     face_valid : (F,) bool
         False for faces dropped as degenerate (zero area, or fewer than 3 distinct positions).
+    back_reflectance, back_emission : (M, 3) float64 or None
+        The back side's material (see docs/design.md, "Two sides"); None: the same as the front,
+        which is Cycles' behaviour for surfaces and mesh lights. An area light is one-sided: its
+        back is black (reflectance 0, emission 0).
     """
 
     vertices: np.ndarray
@@ -54,6 +58,14 @@ class Scene:
     face_normals: np.ndarray
     face_areas: np.ndarray
     face_valid: np.ndarray
+    back_reflectance: np.ndarray = None
+    back_emission: np.ndarray = None
+
+    def back_materials(self):
+        """(reflectance, emission) of the back sides, (M, 3) each."""
+        rho = self.reflectance if self.back_reflectance is None else self.back_reflectance
+        le = self.emission if self.back_emission is None else self.back_emission
+        return rho, le
 
     @property
     def n_faces(self):
@@ -132,7 +144,8 @@ def _first_bad_row(mask):
 
 
 def make_scene(vertices, corner_verts, face_starts, face_sizes, face_materials, reflectance,
-               emission, *, face_objects=None, object_names=None, material_names=None):
+               emission, *, face_objects=None, object_names=None, material_names=None,
+               back_reflectance=None, back_emission=None):
     """Validate scene arrays and derive per-face normals and areas.
 
     Parameters
@@ -153,6 +166,8 @@ def make_scene(vertices, corner_verts, face_starts, face_sizes, face_materials, 
     face_objects : (F,) int, optional
         Object index of every face (default: one object), used to name faces in messages.
     object_names, material_names : sequence of str, optional
+    back_reflectance, back_emission : (M, 3) float, optional
+        Material of the back sides (default: the same as the front). Same rules as the front.
 
     Returns
     -------
@@ -171,6 +186,10 @@ def make_scene(vertices, corner_verts, face_starts, face_sizes, face_materials, 
     face_materials = _as_index_array("face_materials", face_materials)
     reflectance = _as_array("reflectance", reflectance, np.float64, 2, 3)
     emission = _as_array("emission", emission, np.float64, 2, 3)
+    if back_reflectance is not None:
+        back_reflectance = _as_array("back_reflectance", back_reflectance, np.float64, 2, 3)
+    if back_emission is not None:
+        back_emission = _as_array("back_emission", back_emission, np.float64, 2, 3)
 
     n_faces = face_starts.shape[0]
     if n_faces == 0 or vertices.shape[0] == 0:
@@ -205,23 +224,35 @@ def make_scene(vertices, corner_verts, face_starts, face_sizes, face_materials, 
         raise SceneError(f"emission must have one row per material ({n_materials}); got {emission.shape[0]}")
     if n_materials == 0:
         raise SceneError("reflectance must have at least one material row; got 0")
-    for name, arr in (("reflectance", reflectance), ("emission", emission)):
+    def mname(m):
+        return material_names[m] if m < len(material_names) else m
+
+    materials = [("reflectance", reflectance), ("emission", emission),
+                 ("back_reflectance", back_reflectance), ("back_emission", back_emission)]
+    for name, arr in materials[2:]:
+        if arr is not None and arr.shape[0] != n_materials:
+            raise SceneError(f"{name} must have one row per material ({n_materials}); "
+                             f"got {arr.shape[0]}")
+    for name, arr in materials:
+        if arr is None:
+            continue
         bad = ~np.isfinite(arr).all(axis=1)
         if bad.any():
             m = _first_bad_row(bad)
-            raise SceneError(f"{name} contains NaN or inf: material {m} "
-                             f"({material_names[m] if m < len(material_names) else m}) is {arr[m].tolist()}")
-    bad = ((reflectance < 0) | (reflectance >= MAX_REFLECTANCE_EXCLUSIVE)).any(axis=1)
-    if bad.any():
-        m = _first_bad_row(bad)
-        raise SceneError(f"reflectance must lie in [0, 1) (1 or more makes the solve singular or "
-                         f"divergent): material {m} ({material_names[m] if m < len(material_names) else m}) "
-                         f"has {reflectance[m].tolist()}")
-    bad = (emission < 0).any(axis=1)
-    if bad.any():
-        m = _first_bad_row(bad)
-        raise SceneError(f"emission must be >= 0: material {m} "
-                         f"({material_names[m] if m < len(material_names) else m}) has {emission[m].tolist()}")
+            raise SceneError(f"{name} contains NaN or inf: material {m} ({mname(m)}) is "
+                             f"{arr[m].tolist()}")
+        if "reflectance" in name:
+            bad = ((arr < 0) | (arr >= MAX_REFLECTANCE_EXCLUSIVE)).any(axis=1)
+            if bad.any():
+                m = _first_bad_row(bad)
+                raise SceneError(f"{name} must lie in [0, 1) (1 or more makes the solve singular "
+                                 f"or divergent): material {m} ({mname(m)}) has {arr[m].tolist()}")
+        else:
+            bad = (arr < 0).any(axis=1)
+            if bad.any():
+                m = _first_bad_row(bad)
+                raise SceneError(f"{name} must be >= 0: material {m} ({mname(m)}) has "
+                                 f"{arr[m].tolist()}")
 
     n_corners = corner_verts.shape[0]
     bad = (corner_verts < 0) | (corner_verts >= vertices.shape[0])
@@ -250,6 +281,8 @@ def make_scene(vertices, corner_verts, face_starts, face_sizes, face_materials, 
     areas = np.where(valid, areas, 0.0)
 
     emitting_materials = (emission > 0).any(axis=1)
+    if back_emission is not None:
+        emitting_materials |= (back_emission > 0).any(axis=1)
     if not (emitting_materials[face_materials] & valid).any():
         raise SceneError("the scene has no emitter: no valid face uses a material with emission > 0 "
                          "(add an emissive material or a light)")
@@ -257,7 +290,8 @@ def make_scene(vertices, corner_verts, face_starts, face_sizes, face_materials, 
     for arr in (normals, areas, valid):
         arr.setflags(write=False)
     return Scene(vertices, corner_verts, face_starts, face_sizes, face_materials, reflectance,
-                 emission, face_objects, object_names, material_names, normals, areas, valid)
+                 emission, face_objects, object_names, material_names, normals, areas, valid,
+                 back_reflectance, back_emission)
 
 
 def _newell(vertices, corner_verts, face_starts, face_sizes):

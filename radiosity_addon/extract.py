@@ -14,11 +14,11 @@ import numpy as np
 
 from .materials import MaterialReader, area_light_polygon, area_light_radiance
 
-#: An area light is modelled as its emitting polygon plus a black cover just behind it, so that it
-#: emits from its front only, as in Cycles (the core's polygons emit from both sides). The cover
-#: sits this fraction of the light's size behind it: small enough that almost none of the back's
-#: emission leaks past the cover's edge (< 1 % for 1e-3), large enough for the hemicube near plane.
-LIGHT_COVER_OFFSET = 1e-3
+#: An area light is modelled as a one-sided emitting polygon: its front emits the converted
+#: radiance, it reflects nothing, and its back side is black (the core's back_reflectance /
+#: back_emission), as a Cycles area light emits from its front only. Unlike Cycles' light it
+#: still casts a shadow from behind (a polygon in the scene); a light hung in the open is thin
+#: enough that this is rarely visible.
 
 
 @dataclass
@@ -144,6 +144,7 @@ def extract(depsgraph, *, selected_only=False):
     out = Extraction(arrays={}, parts=[])
     verts, corner_verts, starts, sizes, face_mats, face_objs = [], [], [], [], [], []
     mat_keys, rho, le, object_names = {}, [], [], []
+    one_sided = []  # materials whose back side is black (area lights)
     nv = nc = 0
     no_material = []
     ignored = []
@@ -177,7 +178,7 @@ def extract(depsgraph, *, selected_only=False):
         if obj.type == "LIGHT":
             if obj.original.hide_render:
                 continue
-            _add_light(inst, unit, out, add_faces, object_names, rho, le, mat_keys)
+            _add_light(inst, unit, out, add_faces, object_names, rho, le, mat_keys, one_sided)
             continue
         if not _is_visible(inst, view_layer, selected_only):
             continue
@@ -231,10 +232,16 @@ def extract(depsgraph, *, selected_only=False):
             emission=np.array(le), face_objects=np.concatenate(face_objs),
             object_names=tuple(object_names),
             material_names=tuple(_material_name(k) for k in mat_keys))
+        if one_sided:
+            back_rho = out.arrays["reflectance"].copy()
+            back_le = out.arrays["emission"].copy()
+            back_rho[one_sided] = 0.0
+            back_le[one_sided] = 0.0
+            out.arrays.update(back_reflectance=back_rho, back_emission=back_le)
     return out
 
 
-def _add_light(inst, unit, out, add_faces, object_names, rho, le, mat_keys):
+def _add_light(inst, unit, out, add_faces, object_names, rho, le, mat_keys, one_sided):
     light = inst.object.data
     if light.type != "AREA":
         return  # reported by _light_warnings
@@ -246,33 +253,24 @@ def _add_light(inst, unit, out, add_faces, object_names, rho, le, mat_keys):
     stretch = np.linalg.norm(np.cross(raw[:3, 0], raw[:3, 1]))
     radiance = area_light_radiance(light, local_area * stretch)
     k = local.shape[0]
-    size = float(np.linalg.norm(pts.max(0) - pts.min(0)))
-    normal = np.cross(pts[1] - pts[0], pts[2] - pts[0])
-    normal /= np.linalg.norm(normal)
-    cover = pts[::-1] - normal * (LIGHT_COVER_OFFSET * size)
     name = inst.object.name
     emit_key = ("light", name, len(rho))
     mat_keys[emit_key] = len(rho)
+    one_sided.append(len(rho))
     rho.append(np.zeros(3))
     le.append(radiance)
-    black_key = ("light cover",)
-    if black_key not in mat_keys:
-        mat_keys[black_key] = len(rho)
-        rho.append(np.zeros(3))
-        le.append(np.zeros(3))
     obj_index = len(object_names)
     object_names.append(f"{name} (area light)")
-    add_faces(np.concatenate([pts, cover]), np.arange(2 * k, dtype=np.int64),
-              np.array([0, k]), np.array([k, k]),
-              np.array([mat_keys[emit_key], mat_keys[black_key]]), obj_index)
+    add_faces(pts, np.arange(k, dtype=np.int64), np.array([0]), np.array([k]),
+              np.array([mat_keys[emit_key]]), obj_index)
     out.lights += 1
 
 
 def _material_name(key):
     if key is None:
         return "(no material)"
-    if isinstance(key, tuple):  # ("light", object name, n) or ("light cover",)
-        return f"{key[0]}: {key[1]}" if len(key) > 1 else key[0]
+    if isinstance(key, tuple):  # ("light", object name, n)
+        return f"{key[0]}: {key[1]}"
     return key
 
 

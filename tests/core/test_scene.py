@@ -76,6 +76,11 @@ def test_face_label_names_object_and_local_index():
     (dict(vertices=np.zeros((0, 3)), corner_verts=[], face_starts=[], face_sizes=[],
           face_materials=[]), r"the scene is empty"),
     (dict(face_objects=[2], object_names=["a"]), r"face_objects\[0\] = 2 is out of range for 1 object"),
+    (dict(back_reflectance=[[0.5, 1.5, 0.5]]), r"back_reflectance must lie in \[0, 1\).*material 0"),
+    (dict(back_emission=[[0.0, -2.0, 0.0]]), r"back_emission must be >= 0: material 0"),
+    (dict(back_emission=[[0, 0, 0], [0, 0, 0]]),
+     r"back_emission must have one row per material \(1\); got 2"),
+    (dict(back_reflectance=[[np.nan, 0, 0]]), r"back_reflectance contains NaN or inf: material 0"),
 ])
 def test_refused_inputs_name_the_argument(overrides, message):
     with pytest.raises(SceneError, match=message):
@@ -141,3 +146,18 @@ def test_cornell_light_is_warm_white():
     rgb = samples.cornell_light_radiance(peak=1.0)
     assert rgb.max() == pytest.approx(1.0)
     assert rgb[0] > rgb[1] > rgb[2] > 0
+
+
+def test_back_materials_default_to_the_front():
+    s = square_scene()
+    rho, le = s.back_materials()
+    assert rho is s.reflectance and le is s.emission
+    one_sided = square_scene(back_reflectance=[[0.0] * 3], back_emission=[[0.0] * 3])
+    rho, le = one_sided.back_materials()
+    np.testing.assert_array_equal(rho, 0.0)
+    np.testing.assert_array_equal(le, 0.0)
+
+
+def test_back_emission_alone_counts_as_an_emitter():
+    s = square_scene(emission=[[0.0] * 3], back_emission=[[2.0] * 3])
+    assert s.back_emission[0, 0] == 2.0
