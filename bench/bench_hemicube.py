@@ -2,7 +2,9 @@
 
 Scene: ``core.samples.room_with_boxes(n_quads)`` (closed room, two boxes, emissive ceiling
 panel), one patch per quad. A random sample of source nodes (front sides) is timed, in calls of
-``--batch`` sources as the bake makes them, after one warm-up call.
+``--batch`` sources as the bake makes them, after one warm-up call. Stages (CPU time): cull,
+items, spans (main group), general (near-plane-clipped groups) and accumulate exclude the
+z-buffer, which is drawn from inside the span stages as spans are made and timed apart.
 
 Run:  .venv/bin/python bench/bench_hemicube.py [--sizes 500 2000 8000] [--res 32 64 128]
                                                [--sources 200] [--batch 64] [--profile]

@@ -24,7 +24,10 @@ loops run over chunks, the five faces and the four edges of a polygon):
    a row are one interval whose ends are computed exactly; the two polygons of a shared edge
    compute the same bound bit for bit from opposite sides, so a closed mesh leaves no gap.
 5. *Z-buffer*: fragments carry a 64-bit key, the float32 bits of 1/W (high) and the item
-   (low); ``np.maximum.at`` keeps the nearest per pixel whatever the drawing order.
+   (low); ``np.maximum.at`` keeps the nearest per pixel whatever the drawing order. Each
+   group's spans are drawn as soon as they are made, a block of spans at a time, _FRAG_SLOTS
+   pixels per span in one broadcast (slots past a span get a negative key, which the maximum
+   ignores) and the rest of longer spans in one more pass.
 6. *Accumulate*: ``np.bincount`` sums the delta form factors of each item's pixels, then
    the items into their (source, node) cells.
 
@@ -417,18 +420,29 @@ def _bounds(alpha, beta0, beta1, sgn, r0, r1):
 #: row count of the group rounded up, within [2, _ROW_SLOTS] (items with more rows continue in
 #: extra units); a row's fragments as (_FRAG_SLOTS, n). Room at R = 64: 2.8 rows per item at
 #: 2000 quads, 1.2 at 8000 (where 2 slots instead of 4 saved 25 % of the span time); 3.3
-#: fragments per row.
+#: fragments per row. _FRAG_SLOTS is even, so a fragment's pixel parity (the tie flip) is the
+#: parity of its row start plus its slot.
 _ROW_SLOTS = 4
 _FRAG_SLOTS = 4
 
+#: Fragment slots past a row's span are not masked out: their 1/W is pushed below zero, so
+#: their key is negative and ``np.maximum.at`` ignores them (the z-buffer starts at 0). The
+#: push is ``(span - 0.5 - slot) * _POISON``: >= 0.5 _POISON (above any real 1/W, at most
+#: 1/near) for a real fragment, <= -0.5 _POISON past the span, finite in float32 for any R.
+_POISON = _F32(1e30)
+_SLOT_RANGE = np.arange(_FRAG_SLOTS, dtype=_F32)[:, None]
+_SLOT_POISON = _SLOT_RANGE * _POISON
+_SLOT_INT = np.arange(_FRAG_SLOTS, dtype=np.int64)[:, None]
 
-def _item_rows(rows, verts, face, pair, ps, first_id, sc, *, near_line=False, bbox=None):
-    """Fragment seeds of every row of a group of polygon items on given faces.
+
+def _item_rows(zbuf, verts, face, pair, ps, first_id, sc, *, near_line=False, bbox=None,
+               clock=None):
+    """Rasterise a group of polygon items on given faces into the z-buffer.
 
     Parameters
     ----------
-    rows : dict of lists
-        Receives flattened per-row arrays (pix, z, dz, item, span), float32.
+    zbuf : (S 3 R^2 + _FRAG_SLOTS,) int64
+        Z-buffer keys (see :func:`_fragments`); updated in place.
     verts : 4 tuples (J, I, W) of (n,) float32
         Polygon vertices in the pixel coordinates of each item's face.
     face, pair : (n,) int
@@ -437,9 +451,16 @@ def _item_rows(rows, verts, face, pair, ps, first_id, sc, *, near_line=False, bb
         Add the near-plane half-plane ``1/W <= 1/near`` (polygons straddling it).
     bbox : (imin, imax) or None
         Projected row interval (of the near-clipped polygon); default from the vertices.
+    clock : dict or None
+        If given, CPU seconds spent in the z-buffer are added to ``clock["zbuffer"]``.
+
+    Returns
+    -------
+    (rows, fragments) : (int, int)
+        Non-empty row spans and fragments drawn.
     """
     if pair.size == 0:
-        return
+        return 0, 0
     alpha, beta0, beta1, det, zu, zv, z0 = _setup(*verts)
     if bbox is None:
         ip = [v[1] / v[2] for v in verts]
@@ -455,89 +476,152 @@ def _item_rows(rows, verts, face, pair, ps, first_id, sc, *, near_line=False, bb
         lines.append(_bounds(-zu, _F32(1.0 / sc.near) - z0, -zv, ones, r0, r1))
     lower = [ln[0] for ln in lines]
     upper = [ln[1] for ln in lines]
+    item = first_id + 1 + np.arange(pair.size, dtype=np.int32)           # 0: empty pixel
     cols = dict(r1=r1, base=(ps[pair] * sc.npix + sc.face_offset[face]).astype(_F32),
-                z0=z0, zu=zu, zv=zv, item=(first_id + np.arange(pair.size)).astype(_F32))
+                z0=z0, zu=zu, zv=zv, item=item)
     n_rows = np.maximum(r1 - r0 + 1, 0)
     slots = int(np.clip(np.ceil(n_rows.mean()), 2, _ROW_SLOTS))          # adapt to item size
-    _row_slots(rows, r0, cols, lower, upper, sc.r, slots)
+    counts = _row_slots(zbuf, r0, cols, lower, upper, sc.r, slots, clock)
     extra = np.ceil(n_rows / slots) - 1                                   # further units
     more = np.flatnonzero(extra > 0)
     if more.size:
         owner, rank = _expand(extra[more].astype(np.int64))
         idx = more[owner]
         r0c = r0[idx] + _F32(slots) * (rank + 1).astype(_F32)
-        _row_slots(rows, r0c, {k: v[idx] for k, v in cols.items()},
-                   [(a[idx], b[idx]) for a, b in lower], [(a[idx], b[idx]) for a, b in upper],
-                   sc.r, slots)
+        more_counts = _row_slots(zbuf, r0c, {k: v[idx] for k, v in cols.items()},
+                                 [(a[idx], b[idx]) for a, b in lower],
+                                 [(a[idx], b[idx]) for a, b in upper], sc.r, slots, clock)
+        counts = (counts[0] + more_counts[0], counts[1] + more_counts[1])
+    return counts
 
 
-def _row_slots(rows, r0, cols, lower, upper, width, slots):
-    """Spans of rows r0 .. r0 + slots - 1 (up to r1) of each item, by broadcasting."""
+def _row_slots(zbuf, r0, cols, lower, upper, width, slots, clock=None):
+    """Spans of rows r0 .. r0 + slots - 1 (up to r1) of each item, drawn into ``zbuf``.
+
+    Returns (non-empty rows, fragments).
+    """
     # Layout (slot, item): the long axis is innermost, so every broadcast runs NumPy's inner
     # loop over thousands of items rather than over a handful of slots.
     c = lambda a: a[None, :]                                              # noqa: E731
     row = c(r0) + np.arange(slots, dtype=_F32)[:, None]
     j_lo = None
+    b = np.empty(row.shape, _F32)
     for k0, k1 in lower:
-        b = c(k1) * row
-        b += c(k0)
-        j_lo = b if j_lo is None else np.maximum(j_lo, b, out=j_lo)
+        if j_lo is None:
+            j_lo = np.multiply(c(k1), row)
+            j_lo += c(k0)
+        else:
+            np.multiply(c(k1), row, out=b)
+            b += c(k0)
+            np.maximum(j_lo, b, out=j_lo)
     j_hi = None
     for k0, k1 in upper:
-        b = c(k1) * row
-        b += c(k0)
-        j_hi = b if j_hi is None else np.minimum(j_hi, b, out=j_hi)
+        if j_hi is None:
+            j_hi = np.multiply(c(k1), row)
+            j_hi += c(k0)
+        else:
+            np.multiply(c(k1), row, out=b)
+            b += c(k0)
+            np.minimum(j_hi, b, out=j_hi)
     np.ceil(j_lo, out=j_lo)
     np.maximum(j_lo, 0, out=j_lo)
     np.minimum(j_lo, width, out=j_lo)
     np.floor(j_hi, out=j_hi)
     np.minimum(j_hi, width - 1, out=j_hi)
     np.maximum(j_hi, -1, out=j_hi)
-    span = j_hi - j_lo
+    span = j_hi
+    span -= j_lo
     span += 1
     span *= row <= c(cols["r1"])
+    filled = np.flatnonzero(span.ravel() > 0)                             # NaN-safe
+    if filled.size == 0:
+        return 0, 0
     pix = row * width
     pix += j_lo
     pix += c(cols["base"])
     z = c(cols["zv"]) * row
     z += c(cols["z0"])
     z += c(cols["zu"]) * j_lo
-    rows["span"].append(span.ravel())
-    rows["pix"].append(pix.ravel())
-    rows["z"].append(z.ravel())
-    rows["dz"].append(np.tile(cols["zu"], slots))
-    rows["item"].append(np.tile(cols["item"], slots))
+    span, pix, z = span.ravel()[filled], pix.ravel()[filled], z.ravel()[filled]
+    zu = np.tile(cols["zu"], slots)[filled]
+    item = np.tile(cols["item"], slots)[filled]
+    tic = time.process_time() if clock is not None else 0.0
+    n_frag = _fragments(zbuf, pix, z, zu, item, span)
+    if clock is not None:
+        clock["zbuffer"] = clock.get("zbuffer", 0.0) + time.process_time() - tic
+    return filled.size, n_frag
 
 
-def _fragments(zbuf, pix, z, dz, item, span, dummy):
-    """Scatter fragments of rows (first _FRAG_SLOTS of each span) into the z-buffer.
+#: Spans per block of :func:`_fragments`: the temporaries of a block (about 16 bytes per
+#: fragment slot each) stay in cache and are reused by the allocator instead of being mapped
+#: afresh, which costs page faults.
+_FRAG_BLOCK = 16384
 
-    Key: high 32 bits the float32 bits of 1/W with the low _DEPTH_DROP bits cleared, low 32
-    bits the item + 1, complemented in odd pixel columns (see _TIE_FLIP). ``np.maximum.at``
-    keeps the nearest per pixel whatever the order. Slots past a row's span go to the
-    ``dummy`` cell. Returns the number of real fragments written.
+
+def _fragments(zbuf, pix, z, dz, item, span):
+    """Scatter the fragments of non-empty row spans into the z-buffer, in blocks of spans.
+
+    Arguments as :func:`_fragment_block`. Returns the number of fragments.
     """
-    offs = np.arange(_FRAG_SLOTS, dtype=_F32)[:, None]                   # (slot, row) layout
-    c = lambda a: a[None, :]                                              # noqa: E731
-    valid = offs < c(span)
-    cell = c(pix) + offs                                                  # float32, exact
-    cell -= dummy
-    cell *= valid
-    cell += dummy
-    cell = cell.astype(np.intp)
-    inv_depth = c(dz) * offs
-    inv_depth += c(z)
-    depth = inv_depth.view(np.int32) & _DEPTH_MASK
-    low = (c(item).astype(np.int32) + 1) ^ ((cell & 1).astype(np.int32) * _TIE_FLIP)
-    if _LITTLE_ENDIAN:   # assemble the two 32-bit halves in place
-        words = np.empty(depth.shape + (2,), dtype=np.int32)
-        words[..., 1] = depth
-        words[..., 0] = low
-        key = words.view(np.int64)
-    else:
-        key = (depth.astype(np.int64) << 32) | low
-    np.maximum.at(zbuf, cell.ravel(), key.ravel())
-    return int(np.count_nonzero(valid))
+    for start in range(0, span.size, _FRAG_BLOCK):
+        block = slice(start, start + _FRAG_BLOCK)
+        _fragment_block(zbuf, pix[block], z[block], dz[block], item[block], span[block])
+    return int(span.sum(dtype=np.float64))
+
+
+def _fragment_block(zbuf, pix, z, dz, item, span):
+    """Scatter the fragments of non-empty row spans into the z-buffer.
+
+    Parameters
+    ----------
+    zbuf : (S 3 R^2 + _FRAG_SLOTS,) int64
+        Keys: high 32 bits the float32 bits of 1/W with the low _DEPTH_DROP bits cleared, low
+        32 bits the item + 1, complemented in odd pixel columns (see _TIE_FLIP).
+        ``np.maximum.at`` keeps the nearest per pixel whatever the order.
+    pix, z, dz, span : (m,) float32
+        Buffer cell and 1/W of the first pixel, 1/W step per pixel, length of each span.
+    item : (m,) int32
+        Item id + 1 of each span.
+
+    Spans are drawn _FRAG_SLOTS pixels at a time, in the (slot, span) layout; slots past a span
+    get a negative key (see _POISON).
+    """
+    pix_i = pix.astype(np.int64)
+    low_even = item ^ ((pix_i & 1).astype(np.int32) * _TIE_FLIP)
+    low_odd = low_even ^ _TIE_FLIP
+    for unit in range(2):
+        inv_depth = dz * _SLOT_RANGE
+        inv_depth += z
+        limit = span - _F32(0.5)
+        limit *= _POISON
+        np.minimum(inv_depth, np.subtract(limit, _SLOT_POISON), out=inv_depth)
+        cell = pix_i + _SLOT_INT
+        if _LITTLE_ENDIAN:   # assemble the two 32-bit halves in place
+            words = np.empty(inv_depth.shape + (2,), dtype=np.int32)
+            np.bitwise_and(inv_depth.view(np.int32), _DEPTH_MASK, out=words[..., 1])
+            words[0::2, :, 0] = low_even
+            words[1::2, :, 0] = low_odd
+            key = words.view(np.int64)
+        else:
+            depth = (inv_depth.view(np.int32) & _DEPTH_MASK).astype(np.int64) << 32
+            key = depth | np.where(_SLOT_INT & 1, low_odd, low_even)
+        np.maximum.at(zbuf, cell.ravel(), key.ravel())
+        if unit:
+            return
+        # Spans longer than the slots continue in units of _FRAG_SLOTS pixels (an even step:
+        # the same parity), all in one more pass.
+        extra = np.ceil(span / _F32(_FRAG_SLOTS)) - 1
+        more = np.flatnonzero(extra > 0)
+        if more.size == 0:
+            return
+        owner, rank = _expand(extra[more].astype(np.int64))
+        idx = more[owner]
+        step = (rank + 1) * _FRAG_SLOTS
+        pix_i = pix_i[idx] + step
+        step = step.astype(_F32)
+        dz, span = dz[idx], span[idx] - step
+        z = z[idx] + dz * step
+        low_even, low_odd = low_even[idx], low_odd[idx]
 
 
 def _chunk_rows(sc, eyes, frames, timings):
@@ -590,43 +674,33 @@ def _chunk_rows(sc, eyes, frames, timings):
     pair_all = np.concatenate(items_pair)
     t2 = time.process_time()
 
-    # 3. Row spans.
-    rows = {k: [] for k in ("pix", "z", "dz", "item", "span")}
-    _item_rows(rows, verts, face_all, pair_all, ps, 0, sc)
+    # 3. Row spans, drawn into the z-buffer as they are made (4.); the buffer has
+    # _FRAG_SLOTS cells of padding for the (negative-key) slots past the last pixel.
+    zbuf = np.zeros(s_n * sc.npix + _FRAG_SLOTS, dtype=np.int64)
+    clock = {"zbuffer": 0.0}
+    n_rows, n_frag = _item_rows(zbuf, verts, face_all, pair_all, ps, 0, sc, clock=clock)
+    zb_spans = clock["zbuffer"]
     t3 = time.process_time()
     item_pair = [pair_all]
     n_items = pair_all.size
     for face, pair, verts_g, bbox in general:
-        _item_rows(rows, verts_g, np.full(pair.size, face), pair, ps, n_items, sc,
-                   near_line=True, bbox=bbox)
+        n = _item_rows(zbuf, verts_g, np.full(pair.size, face), pair, ps, n_items, sc,
+                       near_line=True, bbox=bbox, clock=clock)
+        n_rows, n_frag = n_rows + n[0], n_frag + n[1]
         item_pair.append(pair)
         n_items += pair.size
     item_pair = np.concatenate(item_pair)
-    rows = {k: np.concatenate(v) if v else np.empty(0, _F32) for k, v in rows.items()}
-    filled = np.flatnonzero(rows["span"] > 0)                              # NaN-safe
-    rows = {k: v[filled] for k, v in rows.items()}
     t4 = time.process_time()
-
-    # 4. Fragments and the z-buffer (one extra cell absorbs padding slots).
-    dummy = s_n * sc.npix
-    zbuf = np.zeros(dummy + 1, dtype=np.int64)
-    span = rows["span"]
-    n_frag = _fragments(zbuf, rows["pix"], rows["z"], rows["dz"], rows["item"], span, dummy)
-    extra = np.ceil(span / _FRAG_SLOTS) - 1
-    more = np.flatnonzero(extra > 0)
-    if more.size:
-        owner, rank = _expand(extra[more].astype(np.int64))
-        idx = more[owner]
-        step = _F32(_FRAG_SLOTS) * (rank + 1).astype(_F32)
-        n_frag += _fragments(zbuf, rows["pix"][idx] + step, rows["z"][idx] + rows["dz"][idx] * step,
-                             rows["dz"][idx], rows["item"][idx], span[idx] - step, dummy)
-    t5 = time.process_time()
+    zb = clock["zbuffer"]       # drawn while spans were made: reported apart
+    t3, t4 = t3 - zb_spans, t4 - zb
+    t5 = t4 + zb
 
     # 5. Accumulate delta form factors per item, then items into their (source, node) cell.
     n_cols = 2 * sc.n_patches
-    low = zbuf[:-1] & _ITEM_MASK
+    zbuf = zbuf[:s_n * sc.npix]
+    low = zbuf & _ITEM_MASK
     low ^= sc.tiled_flip(s_n)                                             # undo the tie flip
-    low *= zbuf[:-1] != 0                                                 # empty: item 0
+    low *= zbuf != 0                                                      # empty: item 0
     per_item = np.bincount(low, weights=sc.tiled(s_n),
                            minlength=item_pair.size + 1)[1:]              # item 0: nothing
     cell = ps[item_pair] * n_cols + sc.poly_patch[pt[item_pair]] + sc.n_patches * back[item_pair]
@@ -637,7 +711,7 @@ def _chunk_rows(sc, eyes, frames, timings):
                          ("general", t4 - t3), ("zbuffer", t5 - t4), ("accumulate", t6 - t5)):
             timings[name] = timings.get(name, 0.0) + dt
         for name, n in (("pairs", ps.size), ("general_pairs", q_gen.size),
-                        ("items", item_pair.size), ("rows", span.size),
+                        ("items", item_pair.size), ("rows", n_rows),
                         ("fragments", n_frag)):
             timings["n_" + name] = timings.get("n_" + name, 0) + int(n)
     return out.reshape(s_n, n_cols)
@@ -863,6 +937,73 @@ def hemicube_rows(patches, sources, *, resolution=64, rotate=False, rng=None, cu
     return polygon_rows(polys, poly_patch, centres, normals, corners, sources,
                         resolution=resolution, rotate=rotate, rng=rng, cull_back=cull_back,
                         _geometry=geometry)
+
+
+def point_rows(patches, points, normals, *, resolution=64, rotate=False, rng=None):
+    """Hemicube rows from arbitrary points: what each point sees of every node.
+
+    The receiver is a point, so the hemicube has no proximity error here (that error comes from
+    treating an area source as its centre); this is what a final gather at mesh vertices needs.
+
+    Parameters
+    ----------
+    patches : core.patches.Patches
+        The scene's patches (``P``); columns are nodes ``q`` (front) and ``q + P`` (back).
+    points : (S, 3) float
+        Eye points. Each is moved ``SURFACE_OFFSET`` x scene diagonal along its normal, so the
+        surface it lies on is not seen.
+    normals : (S, 3) float
+        Unit viewing normals.
+    resolution, rotate, rng
+        As :func:`hemicube_rows`.
+
+    Returns
+    -------
+    (S, 2P) float64
+        Point-to-node form factors (differential area to node).
+    """
+    resolution = _check_resolution(resolution)
+    points = np.asarray(points, dtype=np.float64)
+    normals = np.asarray(normals, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 3 or normals.shape != points.shape:
+        raise ValueError(f"points and normals must both have shape (S, 3); got {points.shape} "
+                         f"and {normals.shape}")
+    if not (np.isfinite(points).all() and np.isfinite(normals).all()):
+        raise ValueError("points and normals must be finite; got NaN or inf")
+    length = np.linalg.norm(normals, axis=1)
+    if points.shape[0] and np.max(np.abs(length - 1.0)) > 1e-6:
+        bad = int(np.argmax(np.abs(length - 1.0)))
+        raise ValueError(f"normals must be unit vectors; normals[{bad}] has length {length[bad]:.6g}")
+    if not isinstance(rotate, (bool, np.bool_)):
+        raise TypeError(f"rotate must be a bool; got {type(rotate).__name__}")
+    _, n_normals, _ = _patch_geometry(patches)
+    n_patches = n_normals.shape[0]
+    out = np.zeros((points.shape[0], 2 * n_patches))
+    if points.shape[0] == 0 or n_patches == 0:
+        return out
+    cached = _CACHE.get("patches")
+    if cached is not None and cached() is patches:
+        polys, poly_patch, geometry = _CACHE["data"]
+    else:
+        polys, poly_patch = draw_polygons(patches)
+        geometry = _Geometry(polys, poly_patch, n_normals)
+    sc = _Scene(geometry, n_patches, resolution, False)
+    z = normals
+    axis = np.eye(3)[np.argmin(np.abs(z), axis=1)]
+    x = axis - np.sum(axis * z, axis=1, keepdims=True) * z
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    y = np.cross(z, x)
+    if rotate:
+        ang = _make_rng(rng).uniform(0.0, 2.0 * np.pi, size=points.shape[0])
+        c, s_ = np.cos(ang)[:, None], np.sin(ang)[:, None]
+        x, y = c * x + s_ * y, c * y - s_ * x
+    frames = np.stack([x, y, z], axis=1)
+    eyes = points + (SURFACE_OFFSET * sc.diag) * z
+    chunk = max(1, min(_CHUNK_PAIRS // polys.shape[0], _CHUNK_PIXELS // sc.npix))
+    for start in range(0, points.shape[0], chunk):
+        stop = min(start + chunk, points.shape[0])
+        out[start:stop] = _chunk_rows(sc, eyes[start:stop], frames[start:stop], None)
+    return out
 
 
 #: The polygons and geometry of the last Patches object seen (by identity, weakly held): a bake

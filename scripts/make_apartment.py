@@ -25,8 +25,6 @@ def _wall(b, axis, at, lo, hi, H, doors, mat="wall", t=0.1):
     """A wall of thickness t centred on ``axis`` = ``at`` spanning [lo, hi] along the other
     horizontal axis, with doorways (d0, d1, height): two faces (one per side) + door reveals."""
     a0, a1 = at - t / 2, at + t / 2
-    holes = [(d0 - lo, d1 - lo, 0.0, dh) for d0, d1, dh in doors]
-    hole = holes[0] if holes else None
     # Face each side split per doorway segment so each rect carries at most one hole.
     cuts = [lo] + [0.5 * (doors[k][1] + doors[k + 1][0]) for k in range(len(doors) - 1)] + [hi]
     for k in range(len(cuts) - 1):

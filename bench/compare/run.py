@@ -276,7 +276,7 @@ def chart(rows, path, title):
     ax.set_ylabel("area-weighted relative RMS error (%)")
     ax.set_title(title)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="lower left")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)

@@ -1,0 +1,94 @@
+"""Adaptive refinement: find the patches across which the solved light changes.
+
+A patch is worth splitting when the radiance of a neighbour on the same smooth surface (sharing a
+corner point, same material, normals within the crease angle) differs from its own by more than a
+threshold, relative to the brighter of the two: that is where a shadow edge, a light's footprint or
+a room corner's fall-off is not resolved at the current patch size. Elsewhere the light is nearly
+constant across a patch and splitting it would only cost time.
+"""
+
+import numpy as np
+
+#: Luminance weights (Rec. 709 / sRGB primaries, scene-linear) for comparing RGB radiance.
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+#: Differences are taken relative to the brighter patch of a pair, but never relative to less
+#: than this fraction of the scene's mean (area-weighted, non-emitting) luminance: a change that
+#: is small against the scene's typical radiance adds little to the area-weighted error, however
+#: large it is against a near-black corner's own level.
+DARK_FLOOR = 0.5
+
+#: Corner positions are matched after rounding to this fraction of the scene's size.
+POINT_TOL = 1e-9
+
+
+def refine_mask(patches, patch_radiance, emitting, *, threshold=0.1, crease_angle=30.0,
+                min_area=0.0):
+    """Mark patches whose light differs from a smooth neighbour's by more than ``threshold``.
+
+    Parameters
+    ----------
+    patches : core.patches.Patches
+    patch_radiance : (P, 3) float
+        Solved front radiance of every patch.
+    emitting : (P,) bool
+        Emitting patches (never marked: their radiance is dominated by their own emission).
+    threshold : float
+        Relative luminance difference, in (0, 1), that marks both patches of a pair.
+    crease_angle : float
+        Degrees: neighbours whose normals differ by more are a different surface (not compared).
+    min_area : float
+        Patches of this area or less are never marked (the refinement's floor).
+
+    Returns
+    -------
+    mask : (P,) bool
+    """
+    L = np.asarray(patch_radiance, dtype=np.float64)
+    P = patches.corners.shape[0]
+    if L.shape != (P, 3):
+        raise ValueError(f"patch_radiance must have shape ({P}, 3); got {L.shape}")
+    emitting = np.asarray(emitting, dtype=bool)
+    if emitting.shape != (P,):
+        raise ValueError(f"emitting must have shape ({P},); got {emitting.shape}")
+    if not 0 < threshold < 1:
+        raise ValueError(f"threshold must be in (0, 1); got {threshold!r}")
+    if P == 0:
+        return np.zeros(0, dtype=bool)
+    y = L @ LUMINANCE
+    a_lit = patches.areas[~emitting]
+    mean = float((a_lit * y[~emitting]).sum() / a_lit.sum()) if a_lit.sum() > 0 else 0.0
+    floor = DARK_FLOOR * mean if mean > 0 else 1e-300
+
+    # Corner points shared by patches: quantised positions -> point ids.
+    corners = patches.corners.reshape(-1, 3)
+    scale = float(np.ptp(corners, axis=0).max()) or 1.0
+    keys = np.round(corners / (POINT_TOL * scale)).astype(np.int64)
+    _, point = np.unique(keys, axis=0, return_inverse=True)
+    point = point.reshape(-1)
+    patch = np.repeat(np.arange(P), 4)
+    # One incidence per (point, patch) (a triangle repeats its last corner).
+    inc = np.unique(np.stack([point, patch], axis=1), axis=0)
+    order = np.argsort(inc[:, 0], kind="stable")
+    inc = inc[order]
+    pt, pa = inc[:, 0], inc[:, 1]
+    start = np.flatnonzero(np.r_[True, pt[1:] != pt[:-1]])
+    count = np.diff(np.r_[start, pt.size])
+    # All ordered pairs of incidences at each point (degree is small: 4-8 on a grid).
+    deg = np.repeat(count, count)
+    first = np.repeat(start, count)
+    i = np.repeat(np.arange(pt.size), deg)
+    j = np.repeat(first, deg) + (np.arange(i.size) - np.repeat(np.cumsum(deg) - deg, deg))
+    a, b = pa[i], pa[j]
+    keep = a != b
+    a, b = a[keep], b[keep]
+    same = (patches.material[a] == patches.material[b]) & \
+        (np.einsum("ij,ij->i", patches.normals[a], patches.normals[b]) >=
+         np.cos(np.radians(crease_angle)) - 1e-12) & ~emitting[a] & ~emitting[b]
+    a, b = a[same], b[same]
+    diff = np.abs(y[a] - y[b]) / np.maximum(np.maximum(y[a], y[b]), floor)
+    over = diff > threshold
+    mask = np.zeros(P, dtype=bool)
+    mask[a[over]] = True
+    mask &= patches.areas > min_area
+    return mask
