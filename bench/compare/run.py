@@ -52,6 +52,14 @@ def our_sweep(face_size, args):
     for solver in args.solvers:
         runs.append(("hemicube R64, %s" % solver,
                      dict(patch_size=sizes[0], method="hemicube", resolution=64, solver=solver)))
+    # Corner colours: the final gather (default) against the patch average it replaced, and
+    # adaptive refinement from twice the face size.
+    runs.append(("hemicube R64, corners averaged",
+                 dict(patch_size=sizes[0], method="hemicube", resolution=64, corners="average")))
+    for levels in args.refine_levels:
+        runs.append(("hemicube R64, refine %d from 2x" % levels,
+                     dict(patch_size=2 * sizes[0], method="hemicube", resolution=64,
+                          refine_levels=levels, refine_threshold=0.25)))
     return runs
 
 
@@ -307,6 +315,8 @@ def main(argv=None):
     ap.add_argument("--methods", nargs="*", default=None, help="besides hemicube: exact, hybrid")
     ap.add_argument("--solvers", nargs="*", default=None,
                     help="solvers to run at R = 64 besides 'auto'")
+    ap.add_argument("--refine-levels", nargs="*", type=int, default=None,
+                    help="adaptive refinement levels to run (from twice the face size)")
     ap.add_argument("--sensors", type=int, default=40, help="Radiance sensor points per scene")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--no-cache", action="store_true", help="re-bake Cycles even if cached")
@@ -324,6 +334,8 @@ def main(argv=None):
         args.methods = ["hybrid", "exact"] if full else []
     if args.solvers is None:
         args.solvers = ["jacobi", "gauss_seidel", "progressive"] if full else []
+    if args.refine_levels is None:
+        args.refine_levels = [1, 2] if full else []
     if any(s < 1 for s in args.cycles_samples):
         ap.error("--cycles-samples must be >= 1")
     Path(args.out).mkdir(parents=True, exist_ok=True)
