@@ -38,3 +38,23 @@ def fresh_file(request):
     bpy.ops.wm.read_homefile(use_factory_startup=True, use_empty=True)
     yield
     bpy.ops.wm.read_homefile(use_factory_startup=True, use_empty=True)
+
+
+# The bpy 4.2 module can crash (SIGSEGV) while the interpreter shuts down, after every test has
+# passed and every report is written. So once pytest is completely done (unconfigure runs after
+# the terminal summary and the JUnit file), the process ends with pytest's own exit status
+# instead of going through Blender's exit handlers.
+_EXIT = {}
+
+
+def pytest_sessionfinish(session, exitstatus):
+    _EXIT["status"] = int(exitstatus)
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_unconfigure(config):
+    if "status" in _EXIT and bpy.app.version < (5, 0, 0):
+        import sys
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(_EXIT["status"])
