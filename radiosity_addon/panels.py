@@ -25,6 +25,8 @@ class VIEW3D_PT_radiosity(bpy.types.Panel):
         sub.active = props.method in ("HEMICUBE", "HYBRID")
         sub.prop(props, "resolution")
         col.prop(props, "solver")
+        col.prop(props, "corners")
+        col.prop(props, "refine_levels")
         col.prop(props, "tolerance")
         col.prop(props, "max_iterations")
         col.prop(props, "selected_only")

@@ -10,6 +10,12 @@ METHODS = [
     ("EXACT", "Exact", "Contour-integral form factors with ray-traced visibility: slow, accurate"),
     ("HYBRID", "Hybrid", "Hemicube, with near patch pairs computed exactly (default: the best accuracy for the time)"),
 ]
+CORNERS = [
+    ("GATHER", "At Vertex", "Gather the solved light at every vertex: the value there, as Cycles "
+     "bakes it (default; about one more hemicube per vertex)"),
+    ("AVERAGE", "Patch Average", "Average the patches around each vertex (Gouraud): free, but a "
+     "patch mean, off next to lights, in corners and along shadow edges"),
+]
 SOLVERS = [
     ("AUTO", "Auto", "Pick the solver from the scene size and memory budget"),
     ("DIRECT", "Direct", "Dense linear solve: exact, small scenes only"),
@@ -35,6 +41,11 @@ class RadiositySettings(bpy.types.PropertyGroup):
     resolution: IntProperty(name="Hemicube Resolution", description="Pixels across a hemicube face",
                             default=64, min=8, max=1024)
     solver: EnumProperty(name="Solver", items=SOLVERS, default="AUTO")
+    corners: EnumProperty(name="Corner Colours", items=CORNERS, default="GATHER")
+    refine_levels: IntProperty(
+        name="Adaptive Levels", default=0, min=0, max=4,
+        description="Split patches where the solved light changes between neighbours and solve "
+                    "again, this many times (0: off)")
     tolerance: FloatProperty(name="Tolerance", description="Relative residual to stop at",
                              default=DEFAULT_TOLERANCE, min=1e-9, max=0.5, precision=6)
     max_iterations: IntProperty(name="Iteration Cap", default=DEFAULT_MAX_ITERATIONS, min=1)

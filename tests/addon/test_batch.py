@@ -99,6 +99,18 @@ def test_same_bake_as_the_operator_and_defaults_from_the_file(package, tmp_path)
     np.testing.assert_array_equal(read_colours(bpy.data.objects["Floor"].data), batch)
 
 
+def test_corner_and_refinement_options_reach_the_bake(package, tmp_path):
+    src, out = tmp_path / "scene.blend", tmp_path / "out.blend"
+    save_scene(src, patch_size=0.5)
+    proc = run_batch(src, "--output", out, "--report", tmp_path / "r.json",
+                     "--corners", "average", "--refine-levels", "1")
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["settings"]["corners"] == "average"
+    assert report["settings"]["refine_levels"] == 1
+    assert report["refinement"][0]["level"] == 0
+
+
 def test_in_place_overwrites_only_when_asked(package, tmp_path):
     src = tmp_path / "scene.blend"
     save_scene(src)
@@ -119,6 +131,8 @@ def test_in_place_overwrites_only_when_asked(package, tmp_path):
     (["--resolution", "abc"], "bad option"),
     (["--frobnicate"], "bad option"),
     (["--resolution", "33"], "resolution"),
+    (["--corners", "median"], "bad option"),
+    (["--refine-levels", "7"], "bad option"),
     ([], "--output"),
 ])
 def test_bad_options_exit_non_zero_with_one_line(package, tmp_path, args, expect):
