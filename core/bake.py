@@ -159,7 +159,7 @@ class BakeSettings:
     """
 
     patch_size: float = 0.5
-    method: str = "hybrid"
+    method: str = "hemicube"
     resolution: int = 64
     rotate_hemicube: bool = True
     solver: str = "auto"

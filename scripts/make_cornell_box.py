@@ -64,6 +64,9 @@ def build(pkg):
         bsdf = mat.node_tree.nodes["Principled BSDF"]
         bsdf.inputs["Base Color"].default_value = (*rgb, 1.0)
         bsdf.inputs["Roughness"].default_value = 1.0
+        # No specular layer: the published box is Lambertian, and Cycles' DIFFUSE bake would
+        # leave out (and the specular layer would take away from) part of the reflected light.
+        bsdf.inputs["Specular IOR Level"].default_value = 0.0
         mat.diffuse_color = (*rgb, 1.0)
         if name == "light":
             bsdf.inputs["Emission Color"].default_value = (*light_rgb, 1.0)

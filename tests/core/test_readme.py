@@ -16,6 +16,6 @@ def test_readme_core_example_runs(tmp_path, capsys):
     runpy.run_path(str(script), run_name="__main__")
     out = capsys.readouterr().out.splitlines()
     assert out[0] == "(8, 3)"
-    assert out[1].startswith("hybrid ")
+    assert out[1].startswith("hemicube ")
     # The closed cube's rows sum to 1: the last line prints them.
     assert set(out[-1].strip("[]").split()) == {"1."}

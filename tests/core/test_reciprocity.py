@@ -130,13 +130,13 @@ def test_where_the_hemicube_breaks_near_a_hung_panel(hung_panel, exact_reference
     assert _error(fixed, exact_reference) < _error(raw, exact_reference)
 
 
-def test_hybrid_default_is_accurate_near_a_hung_panel(hung_panel, exact_reference):
-    # The default method computes near pairs exactly: energy balance within 2 % (measured
+def test_hybrid_is_accurate_near_a_hung_panel(hung_panel, exact_reference):
+    # The hybrid computes near pairs exactly: energy balance within 2 % (measured
     # -1.4 %: the far entries of a row are rescaled to keep its row sum, which is not exactly
     # reciprocal) and within 5 % of the exact method overall (measured 1.8 %; far pairs keep
     # the hemicube's R = 64 aliasing, a few % per pair at this patch size). The raw hemicube
     # on the same scene: balance -138 %, error 207 %.
-    res = bake(hung_panel, BakeSettings(patch_size=0.5))
+    res = bake(hung_panel, BakeSettings(patch_size=0.5, method="hybrid"))
     assert res.report["method"] == "hybrid"
     assert abs(_balance(res)) < 0.02
     assert _error(res, exact_reference) < 0.05
