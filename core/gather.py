@@ -14,6 +14,8 @@ the adjacent wall is seen from the surface's side instead of exactly edge-on.
 
 import numpy as np
 
+from .geometry import pairs_by_key
+
 #: The gather point is moved from the vertex towards the centroids of its group's faces by this
 #: fraction of the faces' size (sqrt of area): a fraction of a millimetre for 0.2 m faces. It
 #: makes a vertex on a concave crease see the adjacent surface as the limit from inside its own
@@ -69,14 +71,7 @@ def corner_groups(scene, *, crease_angle=30.0):
     centroid /= scene.face_sizes[:, None]
 
     # All ordered pairs of valid corners at the same vertex (a vertex has few corners).
-    order = np.argsort(v, kind="stable")
-    vs = v[order]
-    start = np.flatnonzero(np.r_[True, vs[1:] != vs[:-1]])
-    count = np.diff(np.r_[start, vs.size])
-    deg = np.repeat(count, count)
-    first = np.repeat(start, count)
-    i = order[np.repeat(np.arange(vs.size), deg)]
-    j = order[np.repeat(first, deg) + (np.arange(deg.sum()) - np.repeat(np.cumsum(deg) - deg, deg))]
+    i, j = pairs_by_key(v)
     same = (mat[i] == mat[j]) & \
         (np.einsum("ij,ij->i", n[i], n[j]) >= np.cos(np.radians(crease_angle)) - 1e-12)
     i, j = i[same], j[same]

@@ -259,3 +259,33 @@ def _angle(a, b, c):
     cos = np.sum(e1 * e2, axis=1) / np.maximum(np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1),
                                               np.finfo(float).tiny)
     return np.arccos(np.clip(cos, -1.0, 1.0))
+
+
+def pairs_by_key(keys):
+    """All ordered pairs (i, j) of positions whose keys are equal, i == j included.
+
+    Vectorised join for small groups (corners at a vertex, patches at a point): the output has
+    sum over groups of size^2 pairs.
+
+    Parameters
+    ----------
+    keys : (n,) int
+        Group key of each position.
+
+    Returns
+    -------
+    i, j : (m,) int64
+        Positions into ``keys``, grouped by key.
+    """
+    keys = np.asarray(keys)
+    if keys.ndim != 1:
+        raise ValueError(f"keys must have shape (n,); got {keys.shape}")
+    order = np.argsort(keys, kind="stable")
+    ks = keys[order]
+    start = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]]) if ks.size else np.zeros(0, np.int64)
+    count = np.diff(np.r_[start, ks.size])
+    deg = np.repeat(count, count)
+    first = np.repeat(start, count)
+    i = np.repeat(np.arange(ks.size), deg)
+    j = np.repeat(first, deg) + (np.arange(deg.sum()) - np.repeat(np.cumsum(deg) - deg, deg))
+    return order[i].astype(np.int64), order[j].astype(np.int64)

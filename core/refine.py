@@ -9,6 +9,8 @@ constant across a patch and splitting it would only cost time.
 
 import numpy as np
 
+from .geometry import pairs_by_key
+
 #: Luminance weights (Rec. 709 / sRGB primaries, scene-linear) for comparing RGB radiance.
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
@@ -69,17 +71,9 @@ def refine_mask(patches, patch_radiance, emitting, *, threshold=0.1, crease_angl
     patch = np.repeat(np.arange(P), 4)
     # One incidence per (point, patch) (a triangle repeats its last corner).
     inc = np.unique(np.stack([point, patch], axis=1), axis=0)
-    order = np.argsort(inc[:, 0], kind="stable")
-    inc = inc[order]
-    pt, pa = inc[:, 0], inc[:, 1]
-    start = np.flatnonzero(np.r_[True, pt[1:] != pt[:-1]])
-    count = np.diff(np.r_[start, pt.size])
     # All ordered pairs of incidences at each point (degree is small: 4-8 on a grid).
-    deg = np.repeat(count, count)
-    first = np.repeat(start, count)
-    i = np.repeat(np.arange(pt.size), deg)
-    j = np.repeat(first, deg) + (np.arange(i.size) - np.repeat(np.cumsum(deg) - deg, deg))
-    a, b = pa[i], pa[j]
+    i, j = pairs_by_key(inc[:, 0])
+    a, b = inc[i, 1], inc[j, 1]
     keep = a != b
     a, b = a[keep], b[keep]
     same = (patches.material[a] == patches.material[b]) & \

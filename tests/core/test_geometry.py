@@ -179,3 +179,16 @@ def test_invalid_triangulation_normal():
 def test_invalid_triangulation_points():
     with pytest.raises(ValueError, match=r"points must have shape \(k, 3\) with k >= 3; got \(2, 3\)"):
         triangulate_polygon(np.zeros((2, 3)), [0.0, 0.0, 1.0])
+
+
+def test_pairs_by_key_lists_every_ordered_pair_within_each_group():
+    from core.geometry import pairs_by_key
+    keys = np.array([5, 2, 5, 9, 2, 5])
+    i, j = pairs_by_key(keys)
+    got = sorted(zip(i.tolist(), j.tolist()))
+    want = sorted((a, b) for a in range(6) for b in range(6) if keys[a] == keys[b])
+    assert got == want
+    e_i, e_j = pairs_by_key(np.zeros(0, dtype=np.int64))
+    assert e_i.size == 0 and e_j.size == 0
+    with pytest.raises(ValueError, match=r"keys must have shape \(n,\); got \(2, 2\)"):
+        pairs_by_key(np.zeros((2, 2)))
