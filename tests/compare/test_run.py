@@ -29,6 +29,20 @@ def test_sensor_points_only_where_every_face_looks_up():
     assert len(run.sensor_points(a, 3, np.random.default_rng(0))) == 3
 
 
+def test_sensor_points_skip_a_wall_tilted_by_a_hair():
+    # The Cornell box's red wall is not planar: its normal is (-1, 0.01, 0.01), whose z part is
+    # positive. It must not count as a floor (Radiance measures irradiance on a horizontal plane).
+    a = _floor_and_wall()
+    V = a["vertices"].astype(float).copy()
+    V[[9, 10], 0] = -0.02     # lean the wall's top edge outwards: normal +x, a little +z
+    a["vertices"] = V
+    wall = V[[0, 6, 10, 9]]
+    n = np.cross(wall[1] - wall[0], wall[3] - wall[0])
+    assert n[2] != 0.0                               # the case being tested: tilted
+    s = run.sensor_points(a, 100, np.random.default_rng(0))
+    assert not set(s.tolist()) & {0, 6, 9, 10}
+
+
 def test_vertex_values_average_corners():
     a = _floor_and_wall()
     cc = np.zeros((24, 3))
