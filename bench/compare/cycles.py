@@ -156,7 +156,8 @@ def principled_material(name, rho, emission):
     """A Lambertian Principled BSDF material (Specular IOR Level 0) with the given rho/emission."""
     import bpy
     mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True  # always on (and deprecated) from Blender 5.0
     node = _principled(mat)
     node.inputs["Base Color"].default_value = (*map(float, rho), 1.0)
     node.inputs["Specular IOR Level"].default_value = 0.0
