@@ -102,25 +102,21 @@ def main():
           f"{'exact 3x3':>10s} {'adaptive':>10s}")
     sq = lambda z, flip: (np.array([[0, 0, z], [0, 1, z], [1, 1, z], [1, 0, z]], float) if flip
                           else np.array([[0, 0, z], [1, 0, z], [1, 1, z], [0, 1, z]], float))
-    for k in (1, 1.5, 2, 3, 4, 5):
-        pt = two_quads(sq(0.0, False), sq(float(k), True))
-        ref = opposed(k)
+    def compare(label, dist, pt, ref):
+        """One table row: F(1->2) of patch pair ``pt`` by each method against ``ref``."""
         hc = hemicube_rows(pt, [0], resolution=64)[0, 1]
         ec = exact_rows(pt, [0])[0, 1]
         e3 = exact_rows(pt, [0], source_order=3)[0, 1]
         ea = exact_rows(pt, [0], source_order="adaptive")[0, 1]
-        print(f"{'opposed unit squares':26s} {k:9.1f} {hc / ref - 1:+13.4f} {ec / ref - 1:+13.4f} "
+        print(f"{label:26s} {dist:9.2f} {hc / ref - 1:+13.4f} {ec / ref - 1:+13.4f} "
               f"{e3 / ref - 1:+10.2e} {ea / ref - 1:+10.2e}")
+
+    for k in (1, 1.5, 2, 3, 4, 5):
+        compare("opposed unit squares", k, two_quads(sq(0.0, False), sq(float(k), True)),
+                opposed(k))
     floor = sq(0.0, False)
     wall = np.array([[0, 0, 0], [0, 0, 1], [0, 1, 1], [0, 1, 0]], float)[::-1]     # faces +x
-    pt = two_quads(floor, wall)
-    ref = 0.200043776075
-    hc = hemicube_rows(pt, [0], resolution=64)[0, 1]
-    ec = exact_rows(pt, [0])[0, 1]
-    e3 = exact_rows(pt, [0], source_order=3)[0, 1]
-    ea = exact_rows(pt, [0], source_order="adaptive")[0, 1]
-    print(f"{'adjacent unit squares':26s} {0.71:9.2f} {hc / ref - 1:+13.4f} {ec / ref - 1:+13.4f} "
-          f"{e3 / ref - 1:+10.2e} {ea / ref - 1:+10.2e}")
+    compare("adjacent unit squares", 0.71, two_quads(floor, wall), 0.200043776075)
     # Luminaire 5 cm under a 0.67 m ceiling patch (room_with_boxes): reference by a 600 x 600
     # midpoint rule over the ceiling patch.
     s_ = 0.6667

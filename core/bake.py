@@ -782,7 +782,6 @@ def _run(scene, settings, patches, store, active, monitor, timings, t_start, war
     monitor.update(0.0, "colours")
     t0 = time.perf_counter()
     patch_radiance = node_radiance[:P].copy()
-    colours = corner_colours(scene, patches, patch_radiance, crease_angle=settings.crease_angle)
     if settings.corners == "gather":
         from .gather import corner_groups, gather_rows, gathered_colours
         if gather is None:
@@ -792,7 +791,15 @@ def _run(scene, settings, patches, store, active, monitor, timings, t_start, war
                                   rng=np.random.default_rng([settings.seed, 2]),
                                   monitor=monitor)
             gather = (groups, store_g)
-        colours = gathered_colours(scene, gather[0], gather[1], node_radiance, colours)
+        # The patch average only fills the corners of dropped faces, which have no gather.
+        fallback = np.zeros((scene.n_corners, 3))
+        if np.any(gather[0].group < 0):
+            fallback = corner_colours(scene, patches, patch_radiance,
+                                      crease_angle=settings.crease_angle)
+        colours = gathered_colours(scene, gather[0], gather[1], node_radiance, fallback)
+    else:
+        colours = corner_colours(scene, patches, patch_radiance,
+                                 crease_angle=settings.crease_angle)
     timings["colours"] = time.perf_counter() - t0
     monitor.update(1.0, "done")
     timings["total"] = time.perf_counter() - t_start

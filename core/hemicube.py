@@ -841,10 +841,7 @@ def polygon_rows(polys, poly_patch, centres, normals, corners, sources, *, resol
     geometry = _geometry if _geometry is not None else _Geometry(polys, poly_patch, normals)
     sc = _Scene(geometry, n_patches, resolution, bool(cull_back))
     eyes, frames = _eye_frames(centres, normals, corners, src, n_patches, sc.diag, angles)
-    chunk = max(1, min(_CHUNK_PAIRS // polys.shape[0], _CHUNK_PIXELS // sc.npix))
-    for start in range(0, src.size, chunk):
-        stop = min(start + chunk, src.size)
-        out[start:stop] = _chunk_rows(sc, eyes[start:stop], frames[start:stop], timings)
+    _rows_in_chunks(sc, eyes, frames, out, timings)
     return out
 
 
@@ -923,17 +920,7 @@ def hemicube_rows(patches, sources, *, resolution=64, rotate=False, rng=None, cu
     poll for progress should pass batches of sources sized to take 0.1-0.2 s.
     """
     centres, normals, corners = _patch_geometry(patches)
-    cached = _CACHE.get("patches")
-    if cached is not None and cached() is patches:
-        polys, poly_patch, geometry = _CACHE["data"]
-    else:
-        polys, poly_patch = draw_polygons(patches)
-        geometry = _Geometry(polys, poly_patch, normals)
-        try:
-            ref = weakref.ref(patches, lambda _: _CACHE.clear())          # freed with them
-            _CACHE.update(patches=ref, data=(polys, poly_patch, geometry))
-        except TypeError:   # not weak-referenceable (a plain namespace): no caching
-            _CACHE.clear()
+    polys, poly_patch, geometry = _drawn(patches, normals)
     return polygon_rows(polys, poly_patch, centres, normals, corners, sources,
                         resolution=resolution, rotate=rotate, rng=rng, cull_back=cull_back,
                         _geometry=geometry)
@@ -981,12 +968,7 @@ def point_rows(patches, points, normals, *, resolution=64, rotate=False, rng=Non
     out = np.zeros((points.shape[0], 2 * n_patches))
     if points.shape[0] == 0 or n_patches == 0:
         return out
-    cached = _CACHE.get("patches")
-    if cached is not None and cached() is patches:
-        polys, poly_patch, geometry = _CACHE["data"]
-    else:
-        polys, poly_patch = draw_polygons(patches)
-        geometry = _Geometry(polys, poly_patch, n_normals)
+    polys, poly_patch, geometry = _drawn(patches, n_normals)
     sc = _Scene(geometry, n_patches, resolution, False)
     z = normals
     axis = np.eye(3)[np.argmin(np.abs(z), axis=1)]
@@ -999,11 +981,31 @@ def point_rows(patches, points, normals, *, resolution=64, rotate=False, rng=Non
         x, y = c * x + s_ * y, c * y - s_ * x
     frames = np.stack([x, y, z], axis=1)
     eyes = points + (SURFACE_OFFSET * sc.diag) * z
-    chunk = max(1, min(_CHUNK_PAIRS // polys.shape[0], _CHUNK_PIXELS // sc.npix))
-    for start in range(0, points.shape[0], chunk):
-        stop = min(start + chunk, points.shape[0])
-        out[start:stop] = _chunk_rows(sc, eyes[start:stop], frames[start:stop], None)
+    _rows_in_chunks(sc, eyes, frames, out, None)
     return out
+
+
+def _drawn(patches, normals):
+    """(polys, poly_patch, _Geometry) of ``patches``, from the cache when it holds them."""
+    cached = _CACHE.get("patches")
+    if cached is not None and cached() is patches:
+        return _CACHE["data"]
+    polys, poly_patch = draw_polygons(patches)
+    geometry = _Geometry(polys, poly_patch, normals)
+    try:
+        ref = weakref.ref(patches, lambda _: _CACHE.clear())              # freed with them
+        _CACHE.update(patches=ref, data=(polys, poly_patch, geometry))
+    except TypeError:   # not weak-referenceable (a plain namespace): no caching
+        _CACHE.clear()
+    return polys, poly_patch, geometry
+
+
+def _rows_in_chunks(sc, eyes, frames, out, timings):
+    """Fill ``out`` (S, 2P) with the rows of every eye, in chunks sized for memory."""
+    chunk = max(1, min(_CHUNK_PAIRS // sc.poly_v.shape[0], _CHUNK_PIXELS // sc.npix))
+    for start in range(0, eyes.shape[0], chunk):
+        stop = min(start + chunk, eyes.shape[0])
+        out[start:stop] = _chunk_rows(sc, eyes[start:stop], frames[start:stop], timings)
 
 
 #: The polygons and geometry of the last Patches object seen (by identity, weakly held): a bake

@@ -15,7 +15,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from make_office import MATERIALS, MeshBuilder, add_camera, add_object, main, new_file  # noqa: E402
+from make_office import (MATERIALS, MeshBuilder, add_camera, add_object, add_room_shell,  # noqa: E402
+                         main, new_file)
 
 APARTMENT_MATERIALS = dict(MATERIALS, plinth=((0.75, 0.74, 0.72), (0, 0, 0)),
                            luminaire=((0.0, 0.0, 0.0), (15.0, 14.4, 13.2)))
@@ -56,16 +57,7 @@ def _wall(b, axis, at, lo, hi, H, doors, mat="wall", t=0.1):
 def build_apartment(face_size=0.13):
     mats = new_file(APARTMENT_MATERIALS)
     W, D, H = 12.0, 8.0, 2.8
-    shell = MeshBuilder(face_size)
-    shell.rect((0, 0, 0), (W, 0, 0), (0, D, 0), "floor")
-    shell.rect((0, 0, H), (0, D, 0), (W, 0, 0), "ceiling")
-    shell.rect((W, 0, 0), (-W, 0, 0), (0, 0, H), "wall", hole=(2.0, 4.0, 0.8, 2.2))  # south, +y
-    shell.rect((0, D, 0), (W, 0, 0), (0, 0, H), "wall")                             # north, -y
-    shell.rect((W, D, 0), (0, -D, 0), (0, 0, H), "wall")                            # east, -x
-    add_object("Shell", shell, mats)
-    accent = MeshBuilder(face_size)
-    accent.rect((0, 0, 0), (0, D, 0), (0, 0, H), "accent")                          # west, +x
-    add_object("AccentWall", accent, mats)
+    add_room_shell("Shell", mats, face_size, W, D, H, opening=(2.0, 4.0, 0.8, 2.2))
     walls = MeshBuilder(face_size)
     _wall(walls, "x", 6.0, 0.0, D, H, [(1.5, 2.4, 2.1), (5.5, 6.4, 2.1)])
     _wall(walls, "y", 4.0, 0.0, 5.95, H, [(2.5, 3.4, 2.1)])

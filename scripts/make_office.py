@@ -135,20 +135,26 @@ def add_camera(location, target, lens=18.0):
     bpy.context.scene.camera = cam
 
 
-def build_office(face_size=0.2):
-    mats = new_file(MATERIALS)
-    W, D, H = 6.0, 4.0, 3.0
+def add_room_shell(name, mats, face_size, W, D, H, opening):
+    """A W x D x H room, normals inward: floor, ceiling, three walls as object ``name`` (the south
+    wall with ``opening`` = (u0, u1, v0, v1) cut out) and the west wall as "AccentWall"."""
     room = MeshBuilder(face_size)
     room.rect((0, 0, 0), (W, 0, 0), (0, D, 0), "floor")                       # floor, +z
     room.rect((0, 0, H), (0, D, 0), (W, 0, 0), "ceiling")                     # ceiling, -z
     # South wall (y = 0, normal +y, into the room) with the opening: u = -x, v = +z.
-    room.rect((W, 0, 0), (-W, 0, 0), (0, 0, H), "wall", hole=(2.4, 3.6, 0.9, 2.4))
+    room.rect((W, 0, 0), (-W, 0, 0), (0, 0, H), "wall", hole=opening)
     room.rect((0, D, 0), (W, 0, 0), (0, 0, H), "wall")                        # north, -y
     room.rect((W, D, 0), (0, -D, 0), (0, 0, H), "wall")                       # east, -x
-    add_object("Room", room, mats)
+    add_object(name, room, mats)
     accent = MeshBuilder(face_size)
     accent.rect((0, 0, 0), (0, D, 0), (0, 0, H), "accent")                    # west, +x
     add_object("AccentWall", accent, mats)
+
+
+def build_office(face_size=0.2):
+    mats = new_file(MATERIALS)
+    W, D, H = 6.0, 4.0, 3.0
+    add_room_shell("Room", mats, face_size, W, D, H, opening=(2.4, 3.6, 0.9, 2.4))
     lum = MeshBuilder(face_size)
     for cx in (2.0, 4.0):
         for cy in (1.3, 2.7):
