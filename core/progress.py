@@ -51,3 +51,24 @@ class Monitor:
 
 #: A monitor that never reports and never cancels.
 SILENT = Monitor()
+
+
+class SubMonitor:
+    """A part [lo, hi] of another monitor's current stage, for a stage made of several steps.
+
+    ``update(f)`` reports ``lo + (hi - lo) f`` to the parent, so that two steps of one stage
+    (e.g. the element gathers, then the vertex gather) keep the fraction non-decreasing.
+    """
+
+    def __init__(self, parent, lo, hi):
+        self._parent, self._lo, self._hi = parent, float(lo), float(hi)
+
+    def update(self, fraction, message=""):
+        f = min(max(float(fraction), 0.0), 1.0)
+        self._parent.update(self._lo + (self._hi - self._lo) * f, message)
+
+    def check(self):
+        self._parent.check()
+
+    def due(self):
+        return self._parent.due()

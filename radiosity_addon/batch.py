@@ -64,6 +64,7 @@ def build_parser(need_input):
     p.add_argument("--max-iterations", type=_positive_int)
     p.add_argument("--corners", choices=["gather", "average"])
     p.add_argument("--refine-levels", type=int, choices=range(0, 5), metavar="0..4")
+    p.add_argument("--element-levels", type=int, choices=range(0, 4), metavar="0..3")
     p.add_argument("--selected-only", action="store_true", default=None)
     p.add_argument("--make-single-user", action="store_true", default=None)
     return p
@@ -134,7 +135,8 @@ def run(argv):
         register()
     options = options_from_props(bpy.context.scene.radiosity)
     for key in ("patch_size", "method", "resolution", "solver", "tolerance", "max_iterations",
-                "corners", "refine_levels", "selected_only", "make_single_user"):
+                "corners", "refine_levels", "element_levels", "selected_only",
+                "make_single_user"):
         value = getattr(args, key)
         if value is not None:
             options[key] = value

@@ -27,6 +27,9 @@ class VIEW3D_PT_radiosity(bpy.types.Panel):
         col.prop(props, "solver")
         col.prop(props, "corners")
         col.prop(props, "refine_levels")
+        sub = col.column()
+        sub.active = props.corners == "GATHER"
+        sub.prop(props, "element_levels")
         col.prop(props, "tolerance")
         col.prop(props, "max_iterations")
         col.prop(props, "selected_only")

@@ -47,6 +47,10 @@ class RadiositySettings(bpy.types.PropertyGroup):
         name="Adaptive Levels", default=0, min=0, max=4,
         description="Split patches where the solved light changes between neighbours and solve "
                     "again, this many times (0: off)")
+    element_levels: IntProperty(
+        name="Receiver Levels", default=2, min=0, max=3,
+        description="After the solve, split patches where the light changes into smaller "
+                    "receivers for the vertex colours, this many times (no re-solve; 0: off)")
     tolerance: FloatProperty(name="Tolerance", description="Relative residual to stop at",
                              default=DEFAULT_TOLERANCE, min=1e-9, max=0.5, precision=6)
     max_iterations: IntProperty(name="Iteration Cap", default=DEFAULT_MAX_ITERATIONS, min=1)

@@ -18,6 +18,7 @@ of its corners), emitters excluded, and the 95th percentile (bench/compare/metri
 
 import argparse
 import csv
+import resource
 import time
 import threading
 from pathlib import Path
@@ -30,7 +31,7 @@ ROOT = Path(__file__).resolve().parents[2]
 SCENES = ("office", "apartment", "cornell_box")
 
 FIELDS = ["scene", "engine", "label", "method", "solver", "patch_size", "resolution", "samples", "seed",
-          "patches", "t_patches", "t_form_factors", "t_solve", "t_colours", "t_total",
+          "patches", "t_patches", "t_form_factors", "t_solve", "t_colours", "t_total", "cpu",
           "peak_mb", "rms", "p95", "bias", "faces", "rms_patch", "p95_patch"]
 
 
@@ -72,6 +73,14 @@ class PeakRSS:
         return False
 
 
+def _cpu_seconds():
+    """User + system CPU seconds of this process, all threads (Cycles' render threads included):
+    on a loaded machine this moves far less than wall time, so both engines are also compared
+    by it."""
+    use = resource.getrusage(resource.RUSAGE_SELF)
+    return use.ru_utime + use.ru_stime
+
+
 def our_sweep(face_size, args):
     """BakeSettings keyword sets of our engine's runs.
 
@@ -90,6 +99,11 @@ def our_sweep(face_size, args):
     for solver in args.solvers:
         runs.append(("hemicube R64, %s" % solver,
                      dict(patch_size=sizes[0], method="hemicube", resolution=64, solver=solver)))
+    # Receiver elements (default 2 levels) against fewer.
+    for levels in args.element_levels:
+        runs.append(("hemicube R64, elements %d" % levels,
+                     dict(patch_size=sizes[0], method="hemicube", resolution=64,
+                          element_levels=levels)))
     # Corner colours: the final gather (default) against the patch average it replaced, and
     # adaptive refinement from twice the face size.
     runs.append(("hemicube R64, corners averaged",
@@ -209,11 +223,14 @@ def run_scene(name, blend, args, rng):
             f = cache / ("%s_cycles_%d_%d.npz" % (stamp, spp, seed))
             if f.exists() and not args.no_cache:
                 z = np.load(f)
-                cyc[spp, seed] = (z["cc"], float(z["seconds"]))
+                cpu = float(z["cpu"]) if "cpu" in z.files else float("nan")
+                cyc[spp, seed] = (z["cc"], float(z["seconds"]), cpu)
                 continue
+            cpu = _cpu_seconds()
             cc, sec = cycles.bake(sc, spp, seed=seed, threads=args.threads)
-            np.savez(f, cc=cc, seconds=sec)
-            cyc[spp, seed] = (cc, sec)
+            cpu = _cpu_seconds() - cpu
+            np.savez(f, cc=cc, seconds=sec, cpu=cpu)
+            cyc[spp, seed] = (cc, sec, cpu)
     top = samples[-1]
     ref_cc = 0.5 * (cyc[top, 0][0] + cyc[top, 1][0])
     ref_faces = metrics.face_values(ref_cc, arrays["face_starts"], arrays["face_sizes"])
@@ -226,25 +243,27 @@ def run_scene(name, blend, args, rng):
                      t_total=cyc[top, 0][1] + cyc[top, 1][1], rms=noise["rms"] / 2,
                      p95=noise["p95"] / 2, bias=0.0, faces=noise["faces"]))
     print("  reference noise (2 seeds at %d spp): %.4f rms" % (top, noise["rms"] / 2))
-    for (spp, seed), (cc, sec) in sorted(cyc.items()):
+    for (spp, seed), (cc, sec, cpu) in sorted(cyc.items()):
         record(dict(engine="cycles", method="path", samples=spp, seed=seed, t_total=sec,
-                    patches=F), cc)
+                    cpu=cpu, patches=F), cc)
 
     face_size = _face_size(arrays) * (1 + 1e-6)
     best = None
     for label, kw in our_sweep(face_size, args):
+        if args.memory_budget_gb is not None:
+            kw = dict(kw, memory_budget=int(args.memory_budget_gb * 2 ** 30))
         settings = BakeSettings(**kw)
         with PeakRSS() as mem:
-            t0 = time.perf_counter()
+            t0, cpu = time.perf_counter(), _cpu_seconds()
             res = bake(scene, settings)
-            wall = time.perf_counter() - t0
+            wall, cpu = time.perf_counter() - t0, _cpu_seconds() - cpu
         peak = mem.peak_mb
         tm = res.report["timings"]
         row = dict(engine="ours", label=label, method=kw["method"], solver=res.report["solver"],
                    patch_size=kw["patch_size"], resolution=kw.get("resolution", ""),
                    patches=res.report["patches"], t_patches=tm.get("patches"),
                    t_form_factors=tm.get("form_factors"), t_solve=tm.get("solve"),
-                   t_colours=tm.get("colours"), t_total=wall, peak_mb=peak)
+                   t_colours=tm.get("colours"), t_total=wall, cpu=cpu, peak_mb=peak)
         # Diagnostic: the same error with our per-face value taken from the patches (area mean of
         # the face's patches) instead of the mean of corner colours, which average patches of
         # neighbouring faces: separates solver/form-factor error from corner interpolation.
@@ -380,8 +399,13 @@ def main(argv=None):
                     help="solvers to run at R = 64 besides 'auto'")
     ap.add_argument("--refine-levels", nargs="*", type=int, default=None,
                     help="adaptive refinement levels to run (from twice the face size)")
+    ap.add_argument("--element-levels", nargs="*", type=int, default=None,
+                    help="receiver element levels to run besides the default (R = 64)")
     ap.add_argument("--sensors", type=int, default=40, help="Radiance sensor points per scene")
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--memory-budget-gb", type=float, default=None,
+                    help="memory_budget of our bakes in GiB (default: BakeSettings' 1 GiB; the "
+                         "apartment needs ~4 for a dense solve instead of matrix-free shooting)")
     ap.add_argument("--no-cache", action="store_true", help="re-bake Cycles even if cached")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results"))
     ap.add_argument("--seed", type=int, default=0, help="seed of the sensor choice")
@@ -399,6 +423,8 @@ def main(argv=None):
         args.solvers = ["jacobi", "gauss_seidel", "progressive"] if full else []
     if args.refine_levels is None:
         args.refine_levels = [1, 2] if full else []
+    if args.element_levels is None:
+        args.element_levels = [0, 1] if full else [0]
     if any(s < 1 for s in args.cycles_samples):
         ap.error("--cycles-samples must be >= 1")
     Path(args.out).mkdir(parents=True, exist_ok=True)

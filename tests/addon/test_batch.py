@@ -109,6 +109,22 @@ def test_corner_and_refinement_options_reach_the_bake(package, tmp_path):
     assert report["settings"]["corners"] == "average"
     assert report["settings"]["refine_levels"] == 1
     assert report["refinement"][0]["level"] == 0
+    assert "elements" not in report          # receiver elements serve the vertex gather only
+
+
+def test_element_levels_reach_the_bake(package, tmp_path):
+    src = tmp_path / "scene.blend"
+    save_scene(src, patch_size=0.5)
+    reports = {}
+    for levels in ("0", "1"):
+        proc = run_batch(src, "--output", tmp_path / ("out%s.blend" % levels),
+                         "--report", tmp_path / ("r%s.json" % levels), "--element-levels", levels)
+        assert proc.returncode == 0, proc.stderr
+        reports[levels] = json.loads((tmp_path / ("r%s.json" % levels)).read_text())
+    assert reports["0"]["settings"]["element_levels"] == 0
+    assert reports["1"]["settings"]["element_levels"] == 1
+    assert "elements" not in reports["0"]
+    assert len(reports["1"]["elements"]["levels"]) <= 1
 
 
 def test_in_place_overwrites_only_when_asked(package, tmp_path):
@@ -133,6 +149,7 @@ def test_in_place_overwrites_only_when_asked(package, tmp_path):
     (["--resolution", "33"], "resolution"),
     (["--corners", "median"], "bad option"),
     (["--refine-levels", "7"], "bad option"),
+    (["--element-levels", "4"], "bad option"),
     ([], "--output"),
 ])
 def test_bad_options_exit_non_zero_with_one_line(package, tmp_path, args, expect):

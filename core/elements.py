@@ -1,0 +1,156 @@
+"""Receiver elements: patches split where the solved light changes, for the final gather to see.
+
+The final gather (:mod:`core.gather`) reads each patch's solved radiance as constant over the
+patch. Where the light changes steeply across a patch, and the gather point sees only part of it,
+that mean is wrong for the part it sees. The typical case: a ceiling patch half over a luminaire
+panel hung below the ceiling. Its hidden half, over the panel, is bright, and its visible half is
+dark, so the floor sees the patch's mean, which is several times too bright. In the office sample
+this made the floor 4 % too bright against both Cycles and Radiance.
+
+Remedy (substructuring, Cohen, Greenberg, Immel & Brock 1986): after the solve, patches whose
+light differs from a smooth neighbour's by more than a threshold (:func:`core.refine.refine_mask`)
+are split into elements, ``levels`` times. Each new element gets its own radiance, one bounce
+gathered at its centre from the solved patches:
+``L_e = Le + rho * sum_j F(e -> j) L_j``. F comes from a hemicube at a point, so there is no
+proximity error. The vertex gather then sees the elements. The solve keeps the coarse patches,
+which carry the energy correctly in aggregate. Only the receivers are refined: a re-solve is not
+needed, and each level costs one hemicube per new element.
+"""
+
+import numpy as np
+
+from .gather import GatherRows
+
+
+class Elements:
+    """Receiver elements of a bake and what re-lighting needs to recompute their radiance.
+
+    Attributes
+    ----------
+    patches : core.patches.Patches
+        The ``E`` elements (a Patches object: split patches replaced by their children).
+    parent : (E,) int64
+        Solved patch each element lies in.
+    computed : (K,) int64
+        Elements whose radiance was gathered at their centre (the rest copy their patch's).
+    rows : GatherRows
+        Point-to-node form factors (against the solved patches' 2P nodes) of ``computed``, in
+        that order.
+    levels : list of dict
+        Per level: ``split`` (patches or elements split) and ``elements`` (count after it).
+    """
+
+    def __init__(self, patches, parent, computed, rows, levels):
+        self.patches, self.parent, self.computed = patches, parent, computed
+        self.rows, self.levels = rows, levels
+
+    def node_radiance(self, scene, node_radiance):
+        """Radiance of the elements' 2E nodes from the solved patches' (2P, 3) node radiance.
+
+        Front: gathered for ``computed`` elements, the patch's own value for the others. Back:
+        the patch's back value (a back side is seen rarely, and never lit by the split's cause).
+        """
+        L = np.asarray(node_radiance, dtype=np.float64)
+        P = L.shape[0] // 2
+        E = self.parent.size
+        out = np.empty((2 * E, 3))
+        out[:E] = L[self.parent]
+        out[E:] = L[P + self.parent]
+        if self.computed.size:
+            material = self.patches.material[self.computed]
+            rho = np.asarray(scene.reflectance)[material]
+            le = np.asarray(scene.emission)[material]
+            out[self.computed] = le + rho * self.rows.incident(L)
+        return out
+
+
+def _survivors(mask, parent):
+    """Index in the split set of every unsplit old item (-1 for split ones): (P_old,) int64."""
+    new_index = np.full(mask.size, -1, dtype=np.int64)
+    kept = np.flatnonzero(~mask[parent])
+    new_index[parent[kept]] = kept
+    return new_index
+
+
+def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_angle,
+                  resolution=64, rotate=True, rng=None, monitor=None, batch=64):
+    """Split the solved patches where their light changes and gather the elements' radiance.
+
+    Parameters
+    ----------
+    scene : core.scene.Scene
+    patches : core.patches.Patches
+        The solved patches (``P``), made by :func:`core.patches.make_patches`.
+    node_radiance : (2P, 3) float
+        Solved radiance of every node.
+    levels : int
+        Splitting rounds, >= 0. Each round splits in four every element whose light differs
+        from a smooth neighbour's by more than ``threshold``. Elements are never smaller than
+        1/4^levels of their patch.
+    threshold : float
+        Relative luminance difference, in (0, 1) (:func:`core.refine.refine_mask`).
+    crease_angle : float
+        Degrees: neighbours across a sharper crease are not compared.
+    resolution, rotate, rng
+        Hemicube settings of the element gathers (:func:`core.hemicube.point_rows`).
+    monitor : core.progress.Monitor, optional
+        Progress (over the levels) and cancel.
+    batch : int
+        Elements per hemicube call.
+
+    Returns
+    -------
+    Elements
+    """
+    from .hemicube import point_rows
+    from .patches import subdivide_patches
+    from .refine import refine_mask
+
+    L = np.asarray(node_radiance, dtype=np.float64)
+    P = patches.areas.size
+    if L.shape != (2 * P, 3):
+        raise ValueError(f"node_radiance must have shape (2P, 3) = ({2 * P}, 3); got {L.shape}")
+    if not isinstance(levels, (int, np.integer)) or levels < 0:
+        raise ValueError(f"levels must be an int >= 0; got {levels!r}")
+    emission = np.asarray(scene.emission)
+    reflectance = np.asarray(scene.reflectance)
+    elements = patches
+    parent = np.arange(P, dtype=np.int64)          # solved patch of every element
+    front = L[:P].copy()                           # current front radiance of every element
+    kept = []                                      # (element ids, cols, vals) of gathered ones
+    steps = []
+    for level in range(levels):
+        emitting = np.any(emission[elements.material] > 0, axis=1)
+        mask = refine_mask(elements, front, emitting, threshold=threshold,
+                           crease_angle=crease_angle)
+        if not mask.any():
+            break
+        elements, split_parent = subdivide_patches(elements, mask)
+        remap = _survivors(mask, split_parent)
+        kept = [(remap[ids], cols, vals) for ids, cols, vals in kept]
+        kept = [(ids[ids >= 0], cols, vals[ids >= 0]) for ids, cols, vals in kept]
+        parent = parent[split_parent]
+        front = front[split_parent]
+        new = np.flatnonzero(mask[split_parent])
+        steps.append(dict(split=int(mask.sum()), elements=int(parent.size)))
+        for s in range(0, new.size, batch):
+            ids = new[s:s + batch]
+            rows = point_rows(patches, elements.centres[ids], elements.normals[ids],
+                              resolution=resolution, rotate=rotate, rng=rng)
+            cols = np.flatnonzero(np.any(rows > 0, axis=0))
+            vals = rows[:, cols].astype(np.float32)
+            kept.append((ids, cols, vals))
+            m = elements.material[ids]
+            front[ids] = emission[m] + reflectance[m] * (vals.astype(np.float64) @ L[cols])
+            if monitor is not None:
+                monitor.update((level + (s + ids.size) / new.size) / levels,
+                               f"elements: level {level + 1}, {parent.size} elements")
+    # Rows kept in the order of ``computed`` (GatherRows' groups are positions in it).
+    computed = np.concatenate([ids for ids, _, _ in kept]) if kept else np.zeros(0, np.int64)
+    store = GatherRows(computed.size, 2 * P)
+    start = 0
+    for ids, cols, vals in kept:
+        store.batches.append((np.arange(start, start + ids.size), cols, vals))
+        store.nbytes += vals.nbytes + cols.nbytes + 8 * ids.size
+        start += ids.size
+    return Elements(elements, parent, computed, store, steps)
