@@ -8,7 +8,7 @@ pixel credits its delta form factor to the node whose polygon is nearest along t
 node q when the polygon is seen from the side its patch normal points to, q + P otherwise.
 
 How the rasteriser works (array operations over a chunk of sources at once; the only Python
-loops run over chunks, the five faces and the four edges of a polygon):
+loops run over chunks, blocks of items or spans, the five faces and the edges of a polygon):
 
 1. *Vertices*: every distinct polygon corner is put in each eye frame once per source,
    classified into the face whose viewing pyramid holds it and given homogeneous pixel
@@ -19,23 +19,34 @@ loops run over chunks, the five faces and the four edges of a polygon):
    only; the others on every face they reach, cropped by the face's bounds. A polygon that
    straddles a face's near plane gets that plane as one more half-plane ``1/W <= 1/near``:
    homogeneous rasterisation (Olano & Greer 1997), i.e. the near-plane clip done per pixel,
-   never a projection through infinity.
+   never a projection through infinity. Straddling polygons wholly beyond one of the planes
+   through the eye and the face's borders are dropped before their clipped extent is computed.
 4. *Row spans*: with edge functions ``E_k = (v_k x v_k+1) . (j, i, 1)`` the covered columns of
    a row are one interval whose ends are computed exactly; the two polygons of a shared edge
    compute the same bound bit for bit from opposite sides, so a closed mesh leaves no gap.
+   Each edge is one line ``j = K0 + K1 i`` evaluated once per row and used as a lower or an
+   upper bound (the other offset pushed out of reach); edges parallel to the rows narrow the
+   row interval instead. Items are set up and spanned _ITEM_BLOCK at a time, so that the
+   temporaries stay a few hundred kB.
 5. *Z-buffer*: fragments carry a 64-bit key, the float32 bits of 1/W (high) and the item
    (low); ``np.maximum.at`` keeps the nearest per pixel whatever the drawing order. Each
-   group's spans are drawn as soon as they are made, a block of spans at a time, _FRAG_SLOTS
-   pixels per span in one broadcast (slots past a span get a negative key, which the maximum
-   ignores) and the rest of longer spans in one more pass.
+   block's spans are drawn as soon as they are made, _FRAG_SLOTS pixels per span in one
+   broadcast (slots past a span get a negative key, which the maximum ignores); the rest of
+   longer spans is held back and drawn for many blocks at once.
 6. *Accumulate*: ``np.bincount`` sums the delta form factors of each item's pixels, then
    the items into their (source, node) cells.
+
+The z-buffer and the tiled delta form factors are kept between chunks and calls (per thread),
+and the allocator is primed once (see _ALLOCATOR_PRIME_BYTES): with megabytes mapped afresh
+for every chunk, page faults took a fifth of the time.
 
 float32 is used from the eye-frame coordinates on (pixel positions to ~1e-5 pixel, depth to
 ~1e-6 relative); the delta form factors and the result are float64.
 """
 
+import math
 import sys
+import threading
 import time
 import weakref
 
@@ -56,19 +67,19 @@ _FACE_SIGNS = np.array([[1, 1, 1], [1, 1, 1], [-1, 1, -1], [-1, 1, 1], [1, 1, -1
 
 #: The z-buffer key of a fragment: the float32 bits of 1/w (positive, so the bits order like the
 #: values) in the high 32 bits, item index + 1 in the low 32 bits; the per-pixel maximum is the
-#: nearest fragment.
-_ITEM_MASK = (1 << 32) - 1
-
+#: nearest fragment. An empty cell holds 0.
+#:
 #: Depth ties. The last _DEPTH_DROP mantissa bits of 1/w are cleared, so fragments of two
 #: polygons that meet at a pixel (float32 rounding differs by an ulp or two) tie exactly; a tie
 #: goes to the larger item in even pixel columns and to the smaller in odd ones (the item is
-#: stored complemented there). Where surfaces meet along a line, e.g. the corner edges of a box
-#: that fall on the diagonals of the top face, the pixels are then shared alternately instead
-#: of all going to one side, which keeps symmetric scenes reciprocal. Depth resolution left:
-#: 2^-(23 - 4) = 2e-6 relative.
+#: stored negated there: as an unsigned low word 2^32 - item, which orders the other way, and
+#: |low word| is the item in every cell, 0 in an empty one). Where surfaces meet along a line,
+#: e.g. the corner edges of a box that fall on the diagonals of the top face, the pixels are then
+#: shared alternately instead of all going to one side, which keeps symmetric scenes reciprocal.
+#: Depth resolution left: 2^-(23 - 4) = 2e-6 relative.
 _DEPTH_DROP = 4
 _DEPTH_MASK = np.int32(~((1 << _DEPTH_DROP) - 1))
-_TIE_FLIP = np.int32((1 << 31) - 1)
+_LOW_WORD = (1 << 32) - 1
 
 #: Work per internal chunk of sources: (source, polygon) pairs and hemicube pixels. Bounded so
 #: that the transient arrays of one chunk stay in the tens of megabytes while still amortising
@@ -279,33 +290,60 @@ class _Scene:
     def __init__(self, geometry, n_patches, resolution, cull_back):
         g = geometry
         self.poly_patch, self.verts, self.poly_v = g.poly_patch, g.verts, g.poly_v
+        # Corners as (5, Q), the first repeated: edge k runs from corner k to k + 1.
+        self.poly_v_t = np.ascontiguousarray(g.poly_v[:, [0, 1, 2, 3, 0]].T)
+        self.verts_t = np.ascontiguousarray(g.verts.T)                     # (3, U)
+        self.plane_n_t = np.ascontiguousarray(g.plane_n.T)                 # (3, Q)
         self.plane_n, self.plane_c, self.diag = g.plane_n, g.plane_c, g.diag
         self.near = HEMICUBE_NEAR * g.diag
         self.n_patches = n_patches
         self.r = resolution
         self.npix = 3 * resolution * resolution
         self.cull_back = cull_back
-        self.dff = _flat_delta_form_factors(resolution)
         self.h = 2.0 / resolution
         # Pixel-buffer layout of one hemicube: top R x R, then four sides R/2 x R (row-major).
         r = resolution
         self.face_offset = np.array([0] + [r * r + k * r * r // 2 for k in range(4)], np.int64)
         self.face_rows = np.array([r] + [r // 2] * 4, np.int64)
         self.face_rows_f = self.face_rows.astype(_F32)
-        self._tiled = {}
 
     def tiled(self, s_n):
         """The delta form factors of ``s_n`` hemicubes in buffer order, (s_n 3 R^2,)."""
-        if s_n not in self._tiled:
-            self._tiled[s_n] = np.tile(self.dff, s_n)
-        return self._tiled[s_n]
+        n = s_n * self.npix
+        tiled = _kept("dff", self.r)
+        if tiled is None or tiled.size < n:
+            tiled = _keep("dff", self.r, np.tile(_flat_delta_form_factors(self.r), s_n))
+        return tiled[:n]
 
-    def tiled_flip(self, s_n):
-        """The tie flip of every cell of ``s_n`` hemicubes (odd columns), (s_n 3 R^2,)."""
-        key = ("flip", s_n)
-        if key not in self._tiled:
-            self._tiled[key] = (np.arange(s_n * self.npix, dtype=np.int64) & 1) * _TIE_FLIP
-        return self._tiled[key]
+    def zbuffer(self, s_n):
+        """A cleared z-buffer of ``s_n`` hemicubes plus _FRAG_SLOTS cells of padding."""
+        n = s_n * self.npix + _FRAG_SLOTS
+        zbuf = _kept("zbuf", None)
+        if zbuf is None or zbuf.size < n:
+            zbuf = _keep("zbuf", None, np.empty(n, dtype=np.int64))
+        zbuf = zbuf[:n]
+        zbuf.fill(0)
+        return zbuf
+
+
+#: Buffers kept across chunks and calls (the z-buffer, the delta form factors tiled over a
+#: chunk's hemicubes): mapping megabytes afresh for every chunk costs a page fault per 4 kB,
+#: more than filling them. One of each per thread (bakes run in worker threads), and only up
+#: to _BUFFER_BYTES each (a chunk's z-buffer up to R = 1024).
+_BUFFER_STORE = threading.local()
+_BUFFER_BYTES = 1 << 25
+
+
+def _kept(name, tag):
+    """This thread's buffer ``name`` if it was kept with ``tag``, else None."""
+    tag_array = getattr(_BUFFER_STORE, name, None)
+    return tag_array[1] if tag_array is not None and tag_array[0] == tag else None
+
+
+def _keep(name, tag, array):
+    """Keep ``array`` (returned) as this thread's buffer ``name`` with ``tag``, if small enough."""
+    setattr(_BUFFER_STORE, name, (tag, array) if array.nbytes <= _BUFFER_BYTES else None)
+    return array
 
 
 def _expand(counts):
@@ -349,35 +387,37 @@ def _pixel_coords(x, y, z, face, h):
     return (u - u0 * w) / h, (v - v0 * w) / h, w, face
 
 
-def _setup(*pts):
-    """Edge lines and depth plane of planar convex polygons given by (J, I, W) vertex triples.
+def _setup(verts):
+    """Edge lines and depth plane of planar convex polygons.
 
-    A triangle repeats its last vertex: the zero edge has all coefficients 0 and constrains
-    nothing.
+    Parameters
+    ----------
+    verts : (3, 5, n) float32
+        J, I, W of the 4 vertices of n polygons and the first again. A triangle repeats its
+        last vertex: the zero edge has all coefficients 0 and constrains nothing.
 
     Returns
     -------
-    alpha, beta0, beta1 : lists of K arrays
+    alpha, beta0, beta1 : (K, n) float32
         Edge k is ``E_k(j, i) = alpha_k j + beta1_k i + beta0_k`` (from v_k x v_k+1); inside
         means ``sign(D) E_k >= 0`` for all k.
-    det : array
+    det : (n,) float32
         D = n . v0 with n = sum_k v_k x v_k+1, the plane's offset (0 for an edge-on polygon).
-    zu, zv, z0 : arrays
+    zu, zv, z0 : (n,) float32
         ``1/W = zu j + zv i + z0`` at pixel centres on the polygon's plane.
     """
-    k_n = len(pts)
-    alpha, beta1, beta0 = [], [], []
-    for k in range(k_n):
-        a, b = pts[k], pts[(k + 1) % k_n]
-        alpha.append(a[1] * b[2] - a[2] * b[1])
-        beta1.append(a[2] * b[0] - a[0] * b[2])
-        beta0.append(a[0] * b[1] - a[1] * b[0])
-    n_j, n_i, n_w = sum(alpha), sum(beta1), sum(beta0)
-    det = n_j * pts[0][0] + n_i * pts[0][1] + n_w * pts[0][2]
-    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
-        inv = 1 / (det + (det == 0))
-        zu, zv, z0 = n_j * inv, n_i * inv, n_w * inv
-    return alpha, beta0, beta1, det, zu, zv, z0
+    j, i, w = verts[:, :4]
+    j1, i1, w1 = verts[:, 1:]                                             # v_k+1
+    alpha = i * w1
+    alpha -= w * i1
+    beta1 = w * j1
+    beta1 -= j * w1
+    beta0 = j * i1
+    beta0 -= i * j1
+    n_j, n_i, n_w = (c[0] + c[1] + c[2] + c[3] for c in (alpha, beta1, beta0))
+    det = n_j * j[0] + n_i * i[0] + n_w * w[0]
+    inv = 1 / (det + (det == 0))
+    return alpha, beta0, beta1, det, n_j * inv, n_i * inv, n_w * inv
 
 
 #: Lines excluded from a bound are pushed this far out (float32 max is 3.4e38). Real lines
@@ -386,34 +426,59 @@ def _setup(*pts):
 _BIG = _F32(1e36)
 
 
-def _bounds(alpha, beta0, beta1, sgn, r0, r1):
-    """Column bounds of the half-planes ``sgn E >= 0`` over rows (arrays of one group).
+def _edge_lines(tab, alpha, beta0, beta1, sgn, r0, r1):
+    """Column bounds of the half-planes ``sgn E >= 0`` over rows, written into ``tab``.
 
     A line with alpha != 0 bounds the columns from below (``sgn alpha > 0``) or above by
-    ``j = (beta0 + beta1 i) * -(1/alpha) = K0 + K1 i``; it is returned as a lower line
-    (K0, K1) and an upper line, the wrong one pushed out of reach. Both polygons of a shared
-    edge hold the negated line, so they compute bit-identical bounds on opposite sides and no
-    pixel is left unclaimed. A line with alpha = 0 (parallel to the rows) restricts rows
-    only: folded into [r0, r1] exactly (in place).
+    ``j = (beta0 + beta1 i) * -(1/alpha) = K0 + K1 i``. Each edge gets one slope K1 and two
+    offsets, the lower (K0 if the line is a lower bound, else K0 - _BIG: out of reach) and the
+    upper (K0, else K0 + _BIG), so that a row evaluates the line once for both bounds. Both
+    polygons of a shared edge hold the negated line, so they compute bit-identical bounds on
+    opposite sides and no pixel is left unclaimed. A line with alpha = 0 (parallel to the
+    rows) restricts rows only: folded into [r0, r1] exactly (in place).
+
+    Parameters
+    ----------
+    tab : (_ITEM_FIELDS + 3 K, n) float32
+        Item table; its rows after _ITEM_FIELDS are filled: the K slopes, the K lower offsets,
+        the K upper offsets.
+    alpha, beta0, beta1 : (K, n) float32
+    sgn : (n,) or (K, n) float32
+        Side of each half-plane (sign of D; 1 for the near plane).
+    r0, r1 : (n,) float32
+        Row interval, narrowed in place.
     """
+    k = alpha.shape[0]
+    k1, k0_low, k0_high = (tab[_ITEM_FIELDS + m * k:_ITEM_FIELDS + (m + 1) * k]
+                           for m in range(3))
     nz = alpha != 0
-    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
-        nia = -(1 / (alpha + ~nz))
-        nia *= nz
-        k0 = beta0 * nia
-        k1 = beta1 * nia
-    an = alpha * sgn
-    low = (an > 0).astype(_F32)
-    up = (an < 0).astype(_F32)
-    flat = np.flatnonzero(~nz)
-    if flat.size:
-        c0, c1 = beta0[flat] * sgn[flat], beta1[flat] * sgn[flat]      # c0 + c1 i >= 0
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            bound = np.nan_to_num(c0 * -(1 / c1), nan=0.0, posinf=1e9, neginf=-1e9)
-        r0[flat] = np.where(c1 > 0, np.maximum(r0[flat], np.ceil(bound)), r0[flat])
-        r1[flat] = np.where(c1 < 0, np.minimum(r1[flat], np.floor(bound)), r1[flat])
-        r1[flat] = np.where((c1 == 0) & (c0 < 0), -1, r1[flat])
-    return (k0 - _BIG * (1 - low), k1 * low), (k0 + _BIG * (1 - up), k1 * up)
+    nia = np.zeros_like(alpha)
+    np.divide(-1, alpha, out=nia, where=nz)     # -(1 / alpha) (negation is exact), 0 if flat
+    k0 = beta0 * nia
+    np.multiply(beta1, nia, out=k1)
+    an = np.multiply(alpha, sgn, out=nia)
+    pushed = ~(an > 0)                          # not a lower bound (NaN included)
+    np.subtract(k0, np.multiply(pushed, _BIG, out=k0_low), out=k0_low)
+    np.logical_not(np.less(an, 0, out=pushed), out=pushed)
+    np.add(k0, np.multiply(pushed, _BIG, out=k0_high), out=k0_high)
+    np.logical_not(nz, out=nz)
+    # Edge by edge: one 2-D nonzero, or a modulo of flat indices, costs several times more.
+    n = alpha.shape[1]
+    items = [np.flatnonzero(flat_edge) for flat_edge in nz]
+    item = np.concatenate(items)
+    if item.size:
+        flat = np.concatenate([row + e * n for e, row in enumerate(items)])
+        s = sgn[item] if sgn.ndim == 1 else sgn.ravel()[flat]
+        c0, c1 = beta0.ravel()[flat] * s, beta1.ravel()[flat] * s       # c0 + c1 i >= 0
+        # Row bound; beyond +-1e9 (or NaN: 0) the item is empty (or unrestricted) either way.
+        bound = c0 * -(1 / c1)
+        np.minimum(bound, _F32(1e9), out=bound)
+        np.maximum(bound, _F32(-1e9), out=bound)
+        bound[np.isnan(bound)] = 0
+        up, down = c1 > 0, c1 < 0
+        np.maximum.at(r0, item[up], np.ceil(bound[up]))
+        np.minimum.at(r1, item[down], np.floor(bound[down]))
+        r1[item[(c1 == 0) & (c0 < 0)]] = -1
 
 
 #: Rows per work unit: an item's rows are processed as (slots, n) broadcasts, slots = the mean
@@ -424,6 +489,19 @@ def _bounds(alpha, beta0, beta1, sgn, r0, r1):
 #: parity of its row start plus its slot.
 _ROW_SLOTS = 4
 _FRAG_SLOTS = 4
+_ROW_RANGE = np.arange(_ROW_SLOTS, dtype=_F32)[:, None]
+
+#: Items per block: each block is set up, spanned and drawn on its own, so that its temporaries
+#: (a few hundred kB) are recycled by the allocator; whole chunks of ~50k items made the heap
+#: grow and shrink by tens of MB per chunk, one page fault per 4 kB (a quarter of the time).
+_ITEM_BLOCK = 16384
+
+#: Rows of the item table (float32, one column per item): the last row, buffer cell of the
+#: face's pixel (0, 0), the depth plane, the item id + 1; then per edge line its slope and
+#: lower and upper offsets (see :func:`_edge_lines`). Values that are integers stay below 2^24
+#: (a chunk's buffer cells and items), so float32 holds them exactly.
+_R1, _BASE, _Z0, _ZU, _ZV, _ITEM = range(6)
+_ITEM_FIELDS = 6
 
 #: Fragment slots past a row's span are not masked out: their 1/W is pushed below zero, so
 #: their key is negative and ``np.maximum.at`` ignores them (the z-buffer starts at 0). The
@@ -435,197 +513,268 @@ _SLOT_POISON = _SLOT_RANGE * _POISON
 _SLOT_INT = np.arange(_FRAG_SLOTS, dtype=np.int64)[:, None]
 
 
-def _item_rows(zbuf, verts, face, pair, ps, first_id, sc, *, near_line=False, bbox=None,
-               clock=None):
-    """Rasterise a group of polygon items on given faces into the z-buffer.
+def _draw_items(zb, verts, face, pair, ps, first_id, sc, *, near_line=False, bbox=None):
+    """Rasterise a group of polygon items into the z-buffer, _ITEM_BLOCK items at a time.
+
+    Arguments as :func:`_item_rows`, ``bbox`` (imin (n,), imax (n,)) or None.
+    Returns (rows, fragments).
+    """
+    n_rows = n_frag = 0
+    for start in range(0, pair.size, _ITEM_BLOCK):
+        block = slice(start, start + _ITEM_BLOCK)
+        counts = _item_rows(zb, verts[:, :, block], face[block], pair[block], ps,
+                            first_id + start, sc, near_line=near_line,
+                            bbox=None if bbox is None else (bbox[0][block], bbox[1][block]))
+        n_rows, n_frag = n_rows + counts[0], n_frag + counts[1]
+    return n_rows, n_frag
+
+
+def _item_rows(zb, verts, face, pair, ps, first_id, sc, *, near_line=False, bbox=None):
+    """Rasterise a block of polygon items on given faces into the z-buffer.
 
     Parameters
     ----------
-    zbuf : (S 3 R^2 + _FRAG_SLOTS,) int64
-        Z-buffer keys (see :func:`_fragments`); updated in place.
-    verts : 4 tuples (J, I, W) of (n,) float32
-        Polygon vertices in the pixel coordinates of each item's face.
+    zb : _ZBuffer
+        Where the items are drawn.
+    verts : (3, 5, n) float32
+        Polygon vertices (J, I, W) in the pixel coordinates of each item's face, the first
+        repeated.
     face, pair : (n,) int
         Face and (source, polygon) pair of each item.
+    ps : (pairs,) int
+        Source (within the chunk) of each pair.
+    first_id : int
+        Items are numbered first_id + 1 ... first_id + n in the z-buffer (0: empty).
     near_line : bool
         Add the near-plane half-plane ``1/W <= 1/near`` (polygons straddling it).
     bbox : (imin, imax) or None
         Projected row interval (of the near-clipped polygon); default from the vertices.
-    clock : dict or None
-        If given, CPU seconds spent in the z-buffer are added to ``clock["zbuffer"]``.
 
     Returns
     -------
     (rows, fragments) : (int, int)
         Non-empty row spans and fragments drawn.
     """
-    if pair.size == 0:
+    n = pair.size
+    if n == 0:
         return 0, 0
-    alpha, beta0, beta1, det, zu, zv, z0 = _setup(*verts)
+    alpha, beta0, beta1, det, zu, zv, z0 = _setup(verts)
     if bbox is None:
-        ip = [v[1] / v[2] for v in verts]
+        ip = verts[1, :4] / verts[2, :4]
         bbox = (np.minimum.reduce(ip), np.maximum.reduce(ip))
     n_rows = sc.face_rows_f[face]
-    r0 = np.clip(np.ceil(bbox[0] - _ROW_SLACK), 0, n_rows).astype(_F32)
-    r1 = np.clip(np.floor(bbox[1] + _ROW_SLACK), -1, n_rows - 1).astype(_F32)
+    r0 = np.ceil(bbox[0] - _ROW_SLACK)
+    r0 = np.minimum(np.maximum(r0, 0, out=r0), n_rows).astype(_F32, copy=False)
+    r1 = np.floor(bbox[1] + _ROW_SLACK)
+    r1 = np.minimum(np.maximum(r1, -1, out=r1), n_rows - 1).astype(_F32, copy=False)
     r1 -= (det == 0) * _F32(1e6)                                          # edge-on: empty
-    sgn = np.sign(det).astype(_F32)
-    lines = [_bounds(a, b0, b1, sgn, r0, r1) for a, b0, b1 in zip(alpha, beta0, beta1)]
+    sgn = np.sign(det)
     if near_line:   # -zu j - zv i + (1/near - z0) >= 0
-        ones = np.ones_like(sgn)
-        lines.append(_bounds(-zu, _F32(1.0 / sc.near) - z0, -zv, ones, r0, r1))
-    lower = [ln[0] for ln in lines]
-    upper = [ln[1] for ln in lines]
-    item = first_id + 1 + np.arange(pair.size, dtype=np.int32)           # 0: empty pixel
-    cols = dict(r1=r1, base=(ps[pair] * sc.npix + sc.face_offset[face]).astype(_F32),
-                z0=z0, zu=zu, zv=zv, item=item)
+        alpha = np.concatenate([alpha, -zu[None]])
+        beta0 = np.concatenate([beta0, (_F32(1.0 / sc.near) - z0)[None]])
+        beta1 = np.concatenate([beta1, -zv[None]])
+        sgn = np.concatenate([np.broadcast_to(sgn, (4, n)), np.ones((1, n), sgn.dtype)])
+    tab = np.empty((_ITEM_FIELDS + 3 * alpha.shape[0], n), _F32)
+    _edge_lines(tab, alpha, beta0, beta1, sgn, r0, r1)
+    tab[_R1] = r1
+    tab[_BASE] = ps[pair] * sc.npix + sc.face_offset[face]
+    tab[_Z0], tab[_ZU], tab[_ZV] = z0, zu, zv
+    tab[_ITEM] = np.arange(first_id + 1, first_id + n + 1, dtype=_F32)  # 0: empty pixel
     n_rows = np.maximum(r1 - r0 + 1, 0)
-    slots = int(np.clip(np.ceil(n_rows.mean()), 2, _ROW_SLOTS))          # adapt to item size
-    counts = _row_slots(zbuf, r0, cols, lower, upper, sc.r, slots, clock)
+    slots = min(max(math.ceil(n_rows.mean()), 2), _ROW_SLOTS)            # adapt to item size
+    counts = _row_slots(zb, r0, tab, sc.r, slots)
     extra = np.ceil(n_rows / slots) - 1                                   # further units
     more = np.flatnonzero(extra > 0)
     if more.size:
         owner, rank = _expand(extra[more].astype(np.int64))
         idx = more[owner]
         r0c = r0[idx] + _F32(slots) * (rank + 1).astype(_F32)
-        more_counts = _row_slots(zbuf, r0c, {k: v[idx] for k, v in cols.items()},
-                                 [(a[idx], b[idx]) for a, b in lower],
-                                 [(a[idx], b[idx]) for a, b in upper], sc.r, slots, clock)
+        more_counts = _row_slots(zb, r0c, np.take(tab, idx, axis=1), sc.r, slots)
         counts = (counts[0] + more_counts[0], counts[1] + more_counts[1])
     return counts
 
 
-def _row_slots(zbuf, r0, cols, lower, upper, width, slots, clock=None):
-    """Spans of rows r0 .. r0 + slots - 1 (up to r1) of each item, drawn into ``zbuf``.
+def _row_slots(zb, r0, tab, width, slots):
+    """Spans of rows r0 .. r0 + slots - 1 (up to the item's last row), drawn into ``zb``.
+
+    Parameters
+    ----------
+    zb : _ZBuffer
+        Where the spans are drawn.
+    r0 : (n,) float32
+        First row of each item's unit.
+    tab : (_ITEM_FIELDS + 3 K, n) float32
+        Item table (see _ITEM_FIELDS and :func:`_edge_lines`).
 
     Returns (non-empty rows, fragments).
     """
     # Layout (slot, item): the long axis is innermost, so every broadcast runs NumPy's inner
     # loop over thousands of items rather than over a handful of slots.
-    c = lambda a: a[None, :]                                              # noqa: E731
-    row = c(r0) + np.arange(slots, dtype=_F32)[:, None]
-    j_lo = None
-    b = np.empty(row.shape, _F32)
-    for k0, k1 in lower:
-        if j_lo is None:
-            j_lo = np.multiply(c(k1), row)
-            j_lo += c(k0)
-        else:
-            np.multiply(c(k1), row, out=b)
-            b += c(k0)
-            np.maximum(j_lo, b, out=j_lo)
-    j_hi = None
-    for k0, k1 in upper:
-        if j_hi is None:
-            j_hi = np.multiply(c(k1), row)
-            j_hi += c(k0)
-        else:
-            np.multiply(c(k1), row, out=b)
-            b += c(k0)
-            np.minimum(j_hi, b, out=j_hi)
+    k = (tab.shape[0] - _ITEM_FIELDS) // 3
+    k1, k0_low, k0_high = (tab[_ITEM_FIELDS + m * k:_ITEM_FIELDS + (m + 1) * k]
+                           for m in range(3))
+    row = r0 + _ROW_RANGE[:slots]
+    # span, pixel, 1/W, 1/W step and item of each (slot, item), compressed to the filled rows
+    # in one take.
+    work = np.empty((5,) + row.shape, _F32)
+    m = np.multiply(k1[0], row)
+    j_lo = m + k0_low[0]
+    j_hi = np.add(m, k0_high[0], out=work[0])
+    b = np.empty_like(m)
+    for e in range(1, k):
+        np.multiply(k1[e], row, out=m)
+        np.add(m, k0_low[e], out=b)
+        np.maximum(j_lo, b, out=j_lo)
+        np.add(m, k0_high[e], out=b)
+        np.minimum(j_hi, b, out=j_hi)
+    # Clipping to the face needs no upper limit on j_lo nor lower on j_hi: such spans are
+    # empty either way.
     np.ceil(j_lo, out=j_lo)
     np.maximum(j_lo, 0, out=j_lo)
-    np.minimum(j_lo, width, out=j_lo)
     np.floor(j_hi, out=j_hi)
     np.minimum(j_hi, width - 1, out=j_hi)
-    np.maximum(j_hi, -1, out=j_hi)
     span = j_hi
     span -= j_lo
     span += 1
-    span *= row <= c(cols["r1"])
-    filled = np.flatnonzero(span.ravel() > 0)                             # NaN-safe
+    ok = np.greater(span, 0)                                              # NaN-safe
+    ok &= row <= tab[_R1]
+    filled = np.flatnonzero(ok)
     if filled.size == 0:
         return 0, 0
-    pix = row * width
+    pix = np.multiply(row, width, out=work[1])
     pix += j_lo
-    pix += c(cols["base"])
-    z = c(cols["zv"]) * row
-    z += c(cols["z0"])
-    z += c(cols["zu"]) * j_lo
-    span, pix, z = span.ravel()[filled], pix.ravel()[filled], z.ravel()[filled]
-    zu = np.tile(cols["zu"], slots)[filled]
-    item = np.tile(cols["item"], slots)[filled]
-    tic = time.process_time() if clock is not None else 0.0
-    n_frag = _fragments(zbuf, pix, z, zu, item, span)
-    if clock is not None:
-        clock["zbuffer"] = clock.get("zbuffer", 0.0) + time.process_time() - tic
-    return filled.size, n_frag
+    pix += tab[_BASE]
+    z = np.multiply(tab[_ZV], row, out=work[2])
+    z += tab[_Z0]
+    z += np.multiply(tab[_ZU], j_lo, out=m)
+    work[3] = tab[_ZU]
+    work[4] = tab[_ITEM]
+    span, pix, z, dz, item = np.take(work.reshape(5, -1), filled, axis=1)
+    return filled.size, zb.draw(pix, z, dz, item.astype(np.int32), span)
 
 
-#: Spans per block of :func:`_fragments`: the temporaries of a block (about 16 bytes per
-#: fragment slot each) stay in cache and are reused by the allocator instead of being mapped
-#: afresh, which costs page faults.
+#: Spans per block of fragments: the temporaries of a block (about 16 bytes per fragment slot
+#: each) stay in cache and are reused by the allocator instead of being mapped afresh, which
+#: costs page faults. Also the number of long spans whose rest is held back (see _ZBuffer).
 _FRAG_BLOCK = 16384
 
 
-def _fragments(zbuf, pix, z, dz, item, span):
-    """Scatter the fragments of non-empty row spans into the z-buffer, in blocks of spans.
-
-    Arguments as :func:`_fragment_block`. Returns the number of fragments.
-    """
-    for start in range(0, span.size, _FRAG_BLOCK):
-        block = slice(start, start + _FRAG_BLOCK)
-        _fragment_block(zbuf, pix[block], z[block], dz[block], item[block], span[block])
-    return int(span.sum(dtype=np.float64))
-
-
-def _fragment_block(zbuf, pix, z, dz, item, span):
-    """Scatter the fragments of non-empty row spans into the z-buffer.
+class _ZBuffer:
+    """The z-buffer of a chunk of hemicubes and the fragments still to be drawn into it.
 
     Parameters
     ----------
-    zbuf : (S 3 R^2 + _FRAG_SLOTS,) int64
-        Keys: high 32 bits the float32 bits of 1/W with the low _DEPTH_DROP bits cleared, low
-        32 bits the item + 1, complemented in odd pixel columns (see _TIE_FLIP).
-        ``np.maximum.at`` keeps the nearest per pixel whatever the order.
-    pix, z, dz, span : (m,) float32
-        Buffer cell and 1/W of the first pixel, 1/W step per pixel, length of each span.
-    item : (m,) int32
-        Item id + 1 of each span.
+    keys : (S 3 R^2 + _FRAG_SLOTS,) int64
+        Cleared keys (see :meth:`_Scene.zbuffer`): high 32 bits the float32 bits of 1/W with
+        the low _DEPTH_DROP bits cleared, low 32 bits the item + 1, negated in odd pixel
+        columns (see _DEPTH_DROP). ``np.maximum.at`` keeps the nearest per pixel whatever the
+        order, so fragments may be drawn in any order.
+    timed : bool
+        Count the CPU seconds spent drawing in ``seconds``.
 
     Spans are drawn _FRAG_SLOTS pixels at a time, in the (slot, span) layout; slots past a span
-    get a negative key (see _POISON).
+    get a negative key (see _POISON). The rest of longer spans (a sixth of them at R = 64) is
+    held back and drawn in units of _FRAG_SLOTS pixels by :meth:`flush`, for all blocks at
+    once: that bookkeeping costs about the same per call whatever the number of spans.
     """
-    pix_i = pix.astype(np.int64)
-    low_even = item ^ ((pix_i & 1).astype(np.int32) * _TIE_FLIP)
-    low_odd = low_even ^ _TIE_FLIP
-    for unit in range(2):
-        inv_depth = dz * _SLOT_RANGE
-        inv_depth += z
-        limit = span - _F32(0.5)
-        limit *= _POISON
-        np.minimum(inv_depth, np.subtract(limit, _SLOT_POISON), out=inv_depth)
-        cell = pix_i + _SLOT_INT
-        if _LITTLE_ENDIAN:   # assemble the two 32-bit halves in place
-            words = np.empty(inv_depth.shape + (2,), dtype=np.int32)
-            np.bitwise_and(inv_depth.view(np.int32), _DEPTH_MASK, out=words[..., 1])
-            words[0::2, :, 0] = low_even
-            words[1::2, :, 0] = low_odd
-            key = words.view(np.int64)
-        else:
-            depth = (inv_depth.view(np.int32) & _DEPTH_MASK).astype(np.int64) << 32
-            key = depth | np.where(_SLOT_INT & 1, low_odd, low_even)
-        np.maximum.at(zbuf, cell.ravel(), key.ravel())
-        if unit:
+
+    def __init__(self, keys, timed=False):
+        self.keys = keys
+        self.timed = timed
+        self.seconds = 0.0
+        self.rest = []                     # (pix, z, dz, low, span) of long spans
+        self.n_rest = 0
+
+    def draw(self, pix, z, dz, item, span):
+        """Draw non-empty row spans; returns the number of fragments.
+
+        Parameters
+        ----------
+        pix, z, dz, span : (m,) float32
+            Buffer cell and 1/W of the first pixel, 1/W step per pixel, length of each span.
+        item : (m,) int32
+            Item id + 1 of each span.
+        """
+        tic = time.process_time() if self.timed else 0.0
+        for start in range(0, span.size, _FRAG_BLOCK):
+            block = slice(start, start + _FRAG_BLOCK)
+            pix_i = pix[block].astype(np.int64)
+            low = item[block]
+            low = np.where(pix_i & 1, -low, low)
+            args = (pix_i, z[block], dz[block], low, span[block])
+            _draw_slots(self.keys, *args)
+            long_ = np.flatnonzero(args[4] > _FRAG_SLOTS)
+            if long_.size:
+                self.rest.append(tuple(a[long_] for a in args))
+                self.n_rest += long_.size
+        if self.timed:
+            self.seconds += time.process_time() - tic
+        if self.n_rest >= _FRAG_BLOCK:
+            self.flush()
+        return int(span.sum(dtype=np.float64))
+
+    def flush(self):
+        """Draw the held-back rest of long spans."""
+        if not self.rest:
             return
-        # Spans longer than the slots continue in units of _FRAG_SLOTS pixels (an even step:
-        # the same parity), all in one more pass.
-        extra = np.ceil(span / _F32(_FRAG_SLOTS)) - 1
-        more = np.flatnonzero(extra > 0)
-        if more.size == 0:
-            return
-        owner, rank = _expand(extra[more].astype(np.int64))
-        idx = more[owner]
-        step = (rank + 1) * _FRAG_SLOTS
-        pix_i = pix_i[idx] + step
-        step = step.astype(_F32)
-        dz, span = dz[idx], span[idx] - step
-        z = z[idx] + dz * step
-        low_even, low_odd = low_even[idx], low_odd[idx]
+        tic = time.process_time() if self.timed else 0.0
+        pix_i, z, dz, low, span = (np.concatenate(part) for part in zip(*self.rest))
+        self.rest, self.n_rest = [], 0
+        for start in range(0, span.size, _FRAG_BLOCK):
+            block = slice(start, start + _FRAG_BLOCK)
+            # Units of _FRAG_SLOTS pixels after the first (an even step: the same parity).
+            units = (np.ceil(span[block] / _F32(_FRAG_SLOTS)) - 1).astype(np.int64)
+            owner, rank = _expand(units)
+            idx = owner + start
+            step = (rank + 1) * _FRAG_SLOTS
+            step_f = step.astype(_F32)
+            dz_u = dz[idx]
+            _draw_slots(self.keys, pix_i[idx] + step, z[idx] + dz_u * step_f, dz_u, low[idx],
+                        span[idx] - step_f)
+        if self.timed:
+            self.seconds += time.process_time() - tic
+
+
+def _draw_slots(keys, pix, z, dz, low, span):
+    """Draw the first _FRAG_SLOTS pixels of spans into the z-buffer ``keys``.
+
+    Parameters
+    ----------
+    pix : (m,) int64
+        Buffer cell of the first pixel.
+    z, dz, span : (m,) float32
+        1/W of the first pixel, 1/W step per pixel, pixels left in the span.
+    low : (m,) int32
+        Low key word of the first pixel: item + 1, negated if its cell is odd.
+    """
+    inv_depth = dz * _SLOT_RANGE
+    inv_depth += z
+    limit = span - _F32(0.5)
+    limit *= _POISON
+    np.minimum(inv_depth, np.subtract(limit, _SLOT_POISON), out=inv_depth)
+    cell = pix + _SLOT_INT
+    if _LITTLE_ENDIAN:   # assemble the two 32-bit halves in place
+        words = np.empty(inv_depth.shape + (2,), dtype=np.int32)
+        np.bitwise_and(inv_depth.view(np.int32), _DEPTH_MASK, out=words[..., 1])
+        words[0::2, :, 0] = low
+        np.negative(low, out=words[1::2, :, 0])
+        key = words.view(np.int64)
+    else:
+        depth = (inv_depth.view(np.int32) & _DEPTH_MASK).astype(np.int64) << 32
+        key = depth | (np.where(_SLOT_INT & 1, -low, low).astype(np.int64) & _LOW_WORD)
+    np.maximum.at(keys, cell.ravel(), key.ravel())
 
 
 def _chunk_rows(sc, eyes, frames, timings):
     """Form-factor rows of one chunk of sources: (S, 2P)."""
+    # Divisions by zero, overflow and NaN are expected and masked throughout (edge-on
+    # polygons, lines parallel to the rows, vertices on the eye plane).
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+        return _chunk_rows_raw(sc, eyes, frames, timings)
+
+
+def _chunk_rows_raw(sc, eyes, frames, timings):
+    """:func:`_chunk_rows` with floating-point warnings already silenced."""
     tic = time.process_time()
     s_n = eyes.shape[0]
     near, h = sc.near, sc.h
@@ -635,24 +784,27 @@ def _chunk_rows(sc, eyes, frames, timings):
     # 1. Unique vertices in every eye frame (S, U); each vertex is classified once per source
     # into the face whose pyramid holds it (-1: below the horizon or nearer than the near
     # plane) and given pixel coordinates on that face.
+    # einsum, not matmul: BLAS would run these thin products on several threads.
     eye_c = np.einsum("sij,sj->si", frames, eyes)
     # float32 from here: relative 6e-8 of the scene size is far below a pixel's footprint.
-    vx, vy, vz = (((sc.verts @ frames[:, k].T).T - eye_c[:, k:k + 1]).astype(_F32)
-                  for k in range(3))
+    vx, vy, vz = ((np.einsum("sj,ju->su", frames[:, k], sc.verts_t) - eye_c[:, k:k + 1])
+                  .astype(_F32) for k in range(3))
     pj, pi, pw, face = _pixel_coords(vx, vy, vz, None, h)
     ok = (pw >= near) & (vz >= 0)
     cls = ((face + 1) * ok - 1).astype(np.int8).ravel()
-    pj, pi, pw = pj.ravel(), pi.ravel(), pw.ravel()
+    pjiw = np.stack([pj.ravel(), pi.ravel(), pw.ravel()])                # (3, S U)
 
     # Pairs: not wholly below the near plane, not edge-on, optionally not back-facing.
-    top_z = np.maximum.reduce([vz[:, tv[:, k]] for k in range(4)])
-    dist = eyes @ sc.plane_n.T - sc.plane_c                               # eye above plane
+    top_z = np.maximum.reduce([np.take(vz, tv[:, k], axis=1) for k in range(4)])
+    dist = np.einsum("sj,jq->sq", eyes, sc.plane_n_t) - sc.plane_c        # eye above plane
     keep = (top_z >= near) & (dist != 0.0)
     if sc.cull_back:
         keep &= dist > 0.0
     ps, pt = np.nonzero(keep)
     back = dist[ps, pt] < 0.0
-    vid = [ps * n_u + tv[pt, k] for k in range(4)]                        # flat vertex ids
+    # (5, pairs) flat vertex ids; take keeps the result C-ordered (a[:, idx] would not, and
+    # reductions over its first axis would then run a 4-long inner loop per pair).
+    vid = ps * n_u + np.take(sc.poly_v_t, pt, axis=1)
     c0 = cls[vid[0]]
     single = (c0 == cls[vid[1]]) & (c0 == cls[vid[2]]) & (c0 == cls[vid[3]]) & (c0 >= 0)
     q_fast = np.flatnonzero(single)
@@ -662,46 +814,40 @@ def _chunk_rows(sc, eyes, frames, timings):
     # 2. Items. Polygons inside one face's pyramid (convex) go to that face only. The others
     # are tested against every face: wholly in front of its near plane -> the same rasteriser
     # (the face's bounds crop them), straddling it -> clipped (general items).
-    fv = [vid[k][q_fast] for k in range(4)]
-    items_v = [[(pj[f], pi[f], pw[f]) for f in fv]]
-    items_face = [c0[q_fast].astype(np.int64)]
-    items_pair = [q_fast]
-    general = _split_general(sc, vid, q_gen, vx.ravel(), vy.ravel(), vz.ravel(),
-                             items_v, items_face, items_pair)
-    verts = [tuple(np.concatenate([iv[k][c] for iv in items_v]) for c in range(3))
-             for k in range(4)]
-    face_all = np.concatenate(items_face)
-    pair_all = np.concatenate(items_pair)
+    verts = np.take(pjiw, np.take(vid, q_fast, axis=1), axis=1)           # (3, 5, n)
+    face = c0[q_fast].astype(np.int64)
+    (face_s, pair_s, verts_s), general = _split_general(
+        sc, np.take(vid, q_gen, axis=1), q_gen, vx.ravel(), vy.ravel(), vz.ravel())
     t2 = time.process_time()
 
-    # 3. Row spans, drawn into the z-buffer as they are made (4.); the buffer has
-    # _FRAG_SLOTS cells of padding for the (negative-key) slots past the last pixel.
-    zbuf = np.zeros(s_n * sc.npix + _FRAG_SLOTS, dtype=np.int64)
-    clock = {"zbuffer": 0.0}
-    n_rows, n_frag = _item_rows(zbuf, verts, face_all, pair_all, ps, 0, sc, clock=clock)
-    zb_spans = clock["zbuffer"]
+    # 3. Row spans, drawn into the z-buffer as they are made (4.). Items are numbered in the
+    # order of item_pair (the tie rule depends on it).
+    zb = _ZBuffer(sc.zbuffer(s_n), timed=timings is not None)
+    n_rows, n_frag = _draw_items(zb, verts, face, q_fast, ps, 0, sc)
+    n = _draw_items(zb, verts_s, face_s, pair_s, ps, q_fast.size, sc)
+    n_rows, n_frag = n_rows + n[0], n_frag + n[1]
+    item_pair = [q_fast, pair_s]
+    zb_spans = zb.seconds
     t3 = time.process_time()
-    item_pair = [pair_all]
-    n_items = pair_all.size
-    for face, pair, verts_g, bbox in general:
-        n = _item_rows(zbuf, verts_g, np.full(pair.size, face), pair, ps, n_items, sc,
-                       near_line=True, bbox=bbox, clock=clock)
+    if general is not None:
+        face_g, pair_g, verts_g, bbox = general
+        n = _draw_items(zb, verts_g, face_g, pair_g, ps, q_fast.size + pair_s.size, sc,
+                        near_line=True, bbox=bbox)
         n_rows, n_frag = n_rows + n[0], n_frag + n[1]
-        item_pair.append(pair)
-        n_items += pair.size
+        item_pair.append(pair_g)
     item_pair = np.concatenate(item_pair)
+    zb.flush()
     t4 = time.process_time()
-    zb = clock["zbuffer"]       # drawn while spans were made: reported apart
-    t3, t4 = t3 - zb_spans, t4 - zb
-    t5 = t4 + zb
+    # The z-buffer is drawn while spans are made: reported apart.
+    t3, t4 = t3 - zb_spans, t4 - zb.seconds
+    t5 = t4 + zb.seconds
 
     # 5. Accumulate delta form factors per item, then items into their (source, node) cell.
+    # |low word of a key| is the item (negated in odd cells for the tie rule; 0: empty).
     n_cols = 2 * sc.n_patches
-    zbuf = zbuf[:s_n * sc.npix]
-    low = zbuf & _ITEM_MASK
-    low ^= sc.tiled_flip(s_n)                                             # undo the tie flip
-    low *= zbuf != 0                                                      # empty: item 0
-    per_item = np.bincount(low, weights=sc.tiled(s_n),
+    n_cells = s_n * sc.npix
+    low = zb.keys.view(np.int32)[0 if _LITTLE_ENDIAN else 1::2][:n_cells]
+    per_item = np.bincount(np.abs(low).astype(np.intp), weights=sc.tiled(s_n),
                            minlength=item_pair.size + 1)[1:]              # item 0: nothing
     cell = ps[item_pair] * n_cols + sc.poly_patch[pt[item_pair]] + sc.n_patches * back[item_pair]
     out = np.bincount(cell, weights=per_item, minlength=s_n * n_cols)
@@ -717,64 +863,97 @@ def _chunk_rows(sc, eyes, frames, timings):
     return out.reshape(s_n, n_cols)
 
 
-def _split_general(sc, vid, q_gen, vx, vy, vz, items_v, items_face, items_pair):
+def _split_general(sc, vid, q_gen, vx, vy, vz):
     """Sort the pairs ``q_gen`` (not inside one pyramid) onto faces.
 
-    Per face: wholly in front of the face's near plane and overlapping the face -> appended to
-    the item lists; straddling the near plane and overlapping the face once clipped there ->
-    returned as (face, pair, verts, (imin, imax)) general groups.
+    Parameters
+    ----------
+    sc : _Scene
+    vid : (5, g) int
+        Flat vertex ids (source * U + vertex) of the pairs' corners, the first repeated.
+    q_gen : (g,) int
+        The pairs.
+    vx, vy, vz : (S U,) float32
+        Eye-frame coordinates of the chunk's vertices.
+
+    Returns
+    -------
+    items : (face (n,), pair (n,), verts (3, 5, n))
+        Items wholly in front of their face's near plane and overlapping the face (the
+        rasteriser crops them to the face), face by face.
+    general : (face (m,), pair (m,), verts (3, 5, m), (imin (m,), imax (m,))) or None
+        Items straddling their face's near plane and overlapping the face once clipped there,
+        with the projected row interval of the clipped polygon.
     """
     near, h, width = sc.near, sc.h, sc.r
-    xyz = [(vx[v], vy[v], vz[v]) for v in (vid[k][q_gen] for k in range(4))]
-    general = []
+    xyz = (vx[vid], vy[vid], vz[vid])                                     # (5, g) each
+    items, general = [], []
     for face in range(5):
-        n_rows = sc.face_rows[face]
-        jiw = [_pixel_coords(*p, face, h) for p in xyz]
-        w = [p[2] for p in jiw]
+        n_rows = float(sc.face_rows[face])
+        jiw = np.stack(_pixel_coords(*xyz, face, h))                      # (3, 5, g)
+        w = jiw[2]
         wmin, wmax = np.minimum.reduce(w), np.maximum.reduce(w)
         front = np.flatnonzero(wmin >= near)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            pj = [p[0][front] / p[2][front] for p in jiw]
-            pi = [p[1][front] / p[2][front] for p in jiw]
+        sub = np.take(jiw, front, axis=2)
+        pj = sub[0] / sub[2]
+        pi = sub[1] / sub[2]
         hit = (np.minimum.reduce(pj) <= width - 0.5) & (np.maximum.reduce(pj) >= -0.5) \
             & (np.minimum.reduce(pi) <= n_rows - 0.5) & (np.maximum.reduce(pi) >= -0.5)
-        sel = front[hit]
-        items_v.append([tuple(c[sel] for c in p) for p in jiw])
-        items_face.append(np.full(sel.size, face, dtype=np.int64))
-        items_pair.append(q_gen[sel])
+        sel = np.flatnonzero(hit)
+        items.append((np.full(sel.size, face, dtype=np.int64), q_gen[front[sel]],
+                      np.take(sub, sel, axis=2)))
         cut = np.flatnonzero((wmin < near) & (wmax >= near))
         if cut.size:
-            sub = [tuple(c[cut] for c in p) for p in jiw]
+            sub = np.take(jiw, cut, axis=2)
+            # Most of these (polygons crossing the eye's plane, seen through the sides) lie
+            # wholly beyond one of the planes through the eye and the face's borders: dropped
+            # before clipping, with a margin far above rounding so that the clipped test
+            # below would drop them too.
+            j, i, w = sub[:, :4]
+            margin = _F32(_PYRAMID_MARGIN) * np.maximum.reduce(np.abs(j) + np.abs(i) + np.abs(w))
+            beyond = (np.maximum.reduce(j + 0.5 * w) < -margin) \
+                | (np.minimum.reduce(j - (width - 0.5) * w) > margin) \
+                | (np.maximum.reduce(i + 0.5 * w) < -margin) \
+                | (np.minimum.reduce(i - (n_rows - 0.5) * w) > margin)
+            near_cut = np.flatnonzero(~beyond)
+            cut, sub = cut[near_cut], np.take(sub, near_cut, axis=2)
             lo, hi = _clipped_bbox(sub, near)
-            with np.errstate(invalid="ignore"):
-                hit = (lo[0] <= width - 0.5) & (hi[0] >= -0.5) \
-                    & (lo[1] <= n_rows - 0.5) & (hi[1] >= -0.5)
+            hit = (lo[0] <= width - 0.5) & (hi[0] >= -0.5) \
+                & (lo[1] <= n_rows - 0.5) & (hi[1] >= -0.5)
             keep = np.flatnonzero(hit)
             if keep.size:
-                verts = [tuple(c[keep] for c in p) for p in sub]
-                general.append((face, q_gen[cut[keep]], verts, (lo[1][keep], hi[1][keep])))
-    return general
+                general.append((np.full(keep.size, face, dtype=np.int64), q_gen[cut[keep]],
+                                np.take(sub, keep, axis=2), lo[1][keep], hi[1][keep]))
+    items = tuple(np.concatenate(part, axis=-1) for part in zip(*items))
+    if not general:
+        return items, None
+    face, pair, verts, lo, hi = (np.concatenate(part, axis=-1) for part in zip(*general))
+    return items, (face, pair, verts, (lo, hi))
+
+
+#: Relative margin (of a polygon's largest |J| + |I| + |W|) by which all its corners must lie
+#: beyond a plane of a face's pyramid for it to be dropped from that face unclipped; float32
+#: rounding of the clipped bounding box is ~1e-6 of that.
+_PYRAMID_MARGIN = 1e-4
 
 
 def _clipped_bbox(verts, near):
-    """Projected bounding box (lo (J, I), hi (J, I)) of polygons clipped at W = near.
+    """Projected bounding box (lo (J, I), hi (J, I)) of polygons clipped at W = near, float64.
 
-    ``verts``: K (J, I, W) triples of (n,) arrays, at least one vertex in front.
-    The clipped polygon's corners are the front vertices and the crossings of the edges with
-    the near plane (at W = near exactly, so projected by dividing by near).
+    ``verts``: (3, 5, n) (J, I, W) of the corners, the first repeated; at least one corner is
+    in front. The clipped polygon's corners are the front corners and the crossings of the
+    edges with the near plane (at W = near exactly, so projected by dividing by near).
     """
-    lo = [np.full(verts[0][0].shape, np.inf) for _ in range(2)]
-    hi = [np.full(verts[0][0].shape, -np.inf) for _ in range(2)]
-    for k in range(len(verts)):
-        a, b = verts[k], verts[(k + 1) % len(verts)]
-        front_a, front_b = a[2] >= near, b[2] >= near
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (near - a[2]) / (b[2] - a[2])
-            for c in range(2):
-                proj = np.where(front_a, a[c] / a[2], np.nan)
-                cut = np.where(front_a != front_b, (a[c] + t * (b[c] - a[c])) / near, np.nan)
-                lo[c] = np.fmin(lo[c], np.fmin(proj, cut))
-                hi[c] = np.fmax(hi[c], np.fmax(proj, cut))
+    a, b = verts[:, :4], verts[:, 1:]                                     # edge k: a -> b
+    front_a, front_b = a[2] >= near, b[2] >= near
+    crosses = front_a != front_b
+    t = (near - a[2]) / (b[2] - a[2])
+    lo, hi = [], []
+    for c in range(2):
+        proj = np.where(front_a, a[c] / a[2], np.nan)
+        cut = np.where(crosses, (a[c] + t * (b[c] - a[c])) / near, np.nan)
+        lo.append(np.fmin.reduce(np.fmin(proj, cut)).astype(np.float64))
+        hi.append(np.fmax.reduce(np.fmax(proj, cut)).astype(np.float64))
     return lo, hi
 
 
@@ -1002,10 +1181,29 @@ def _drawn(patches, normals):
 
 def _rows_in_chunks(sc, eyes, frames, out, timings):
     """Fill ``out`` (S, 2P) with the rows of every eye, in chunks sized for memory."""
+    _prime_allocator()
     chunk = max(1, min(_CHUNK_PAIRS // sc.poly_v.shape[0], _CHUNK_PIXELS // sc.npix))
     for start in range(0, eyes.shape[0], chunk):
         stop = min(start + chunk, eyes.shape[0])
         out[start:stop] = _chunk_rows(sc, eyes[start:stop], frames[start:stop], timings)
+
+
+#: A chunk allocates and frees some 20 MB of temporaries. glibc's malloc returns freed memory
+#: at the top of its heap to the system once more than its trim threshold (initially 128 kB)
+#: is free there, and every chunk then pays a page fault per 4 kB to get it back: a fifth of
+#: the run time at R = 64. glibc raises that threshold to twice the size of any freed block
+#: it had mapped apart (up to 32 MB, see mallopt(3), M_MMAP_THRESHOLD), so freeing one such
+#: block once keeps the chunks' memory in the process. Elsewhere (another malloc) it only
+#: costs one allocation.
+_ALLOCATOR_PRIME_BYTES = 16 << 20
+_PRIMED = []
+
+
+def _prime_allocator():
+    """Allocate and free one _ALLOCATOR_PRIME_BYTES block, once per process."""
+    if not _PRIMED:
+        np.empty(_ALLOCATOR_PRIME_BYTES, dtype=np.uint8)
+        _PRIMED.append(True)
 
 
 #: The polygons and geometry of the last Patches object seen (by identity, weakly held): a bake
