@@ -110,6 +110,39 @@ def relative_errors(test, reference, weights, mask=None):
             "bias": float(np.sum(ww * rel)), "faces": int(keep.sum())}
 
 
+def concentration(test, reference, weights, mask=None, top=20):
+    """How much of the squared error a few faces carry.
+
+    Parameters as :func:`relative_errors`; ``top`` faces with the largest area-weighted squared
+    relative error are set apart.
+
+    Returns
+    -------
+    dict
+        ``share`` (their fraction of the mean square), ``area`` (their fraction of the area
+        compared), ``rms_rest`` (the RMS over the other faces), ``faces`` (their indices).
+    """
+    t = luminance(test)
+    r = luminance(reference)
+    w = _as_array("weights", weights, 1)
+    keep = np.ones(len(r), dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    keep = keep & (w > 0)
+    mean_ref = np.sum(w[keep] * r[keep]) / np.sum(w[keep])
+    keep &= r > DARK_FRACTION * mean_ref
+    idx = np.flatnonzero(keep)
+    rel = (t[idx] - r[idx]) / r[idx]
+    ww = w[idx] / np.sum(w[idx])
+    ms = ww * rel ** 2
+    order = np.argsort(-ms, kind="stable")
+    k = min(int(top), idx.size)
+    head, rest = order[:k], order[k:]
+    share = float(ms[head].sum() / ms.sum()) if ms.sum() > 0 else 0.0
+    rest_w = ww[rest].sum()
+    rms_rest = float(np.sqrt(ms[rest].sum() / rest_w)) if rest_w > 0 else 0.0
+    return {"share": share, "area": float(ww[head].sum()), "rms_rest": rms_rest,
+            "faces": idx[head]}
+
+
 def weighted_quantile(values, weights, q):
     """Quantile of ``values`` (n,) under ``weights`` (n,): smallest v with weight(<= v) >= q."""
     v = _as_array("values", values, 1)

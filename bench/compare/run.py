@@ -276,6 +276,15 @@ def run_scene(name, blend, args, rng):
         e = metrics.relative_errors(fm, ref_faces, area, keep & (fa > 0))
         row.update(rms_patch=e["rms"], p95_patch=e["p95"])
         record(row, res.corner_colours)
+        if label.startswith("hemicube, ") and kw.get("resolution") == 64 and ref_faces is not None:
+            c = metrics.concentration(
+                metrics.face_values(res.corner_colours, arrays["face_starts"],
+                                    arrays["face_sizes"]), ref_faces, area, keep)
+            names = sorted({str(arrays["object_names"][arrays["face_objects"][f]])
+                            for f in c["faces"]}) if "object_names" in arrays else []
+            print("    the 20 worst faces (%.1f %% of the area; objects %s) carry %.0f %% of the "
+                  "mean square; RMS over the rest %.2f %%"
+                  % (100 * c["area"], ", ".join(names), 100 * c["share"], 100 * c["rms_rest"]))
         if best is None or row["rms"] < best[0]["rms"]:
             best = (row, res.corner_colours)
 

@@ -74,3 +74,15 @@ def test_face_values_rejects(args, match):
 def test_relative_errors_rejects_length_mismatch():
     with pytest.raises(ValueError, match="same length"):
         metrics.relative_errors(np.ones((2, 3)), np.ones((3, 3)), np.ones(3))
+
+
+def test_concentration_sets_the_worst_faces_apart():
+    ref = np.ones((5, 3))
+    test = ref.copy()
+    test[2] *= 1.5                 # one face 50 % off, the others 1 % off
+    test[[0, 1, 3, 4]] *= 1.01
+    c = metrics.concentration(test, ref, np.ones(5), top=1)
+    assert list(c["faces"]) == [2]
+    assert c["area"] == pytest.approx(0.2)
+    assert c["rms_rest"] == pytest.approx(0.01)
+    assert c["share"] == pytest.approx(0.25 / (0.25 + 4 * 1e-4))
