@@ -32,8 +32,10 @@ import numpy as np
 from .constants import (DEFAULT_CREASE_ANGLE, DEFAULT_MAX_ITERATIONS, DEFAULT_MEMORY_BUDGET,
                         DEFAULT_TOLERANCE)
 from .errors import SettingsError
+from .gather import compact_rows
 from .progress import Monitor, SubMonitor
-from .solvers import (solve_direct, solve_gauss_seidel, solve_jacobi, solve_progressive)
+from .solvers import (matvec, solve_direct, solve_gauss_seidel, solve_jacobi,
+                      solve_progressive)
 
 METHODS = ("hemicube", "exact", "hybrid")
 SOLVERS = ("auto", "direct", "jacobi", "gauss_seidel", "progressive")
@@ -270,7 +272,7 @@ class BakeResult:
 # ----------------------------------------------------------------------------- form factor rows
 
 
-def _row_function(patches, method, resolution, rotate, rng, rays, near=4.0):
+def _row_function(patches, method, resolution, rotate, rng, rays, near=None):
     """Return rows(sources (S,) int64) -> (S, 2P) float64 for the chosen method."""
     if method == "hemicube":
         from .hemicube import hemicube_rows
@@ -291,7 +293,8 @@ def _row_function(patches, method, resolution, rotate, rng, rays, near=4.0):
                               source_order="adaptive")
         return rows
     if method == "hybrid":
-        from .exact import hybrid_rows
+        from .exact import NEAR_DEFAULT, hybrid_rows
+        near = NEAR_DEFAULT if near is None else near
 
         def rows(sources):
             return hybrid_rows(patches, sources, resolution=resolution, rays=rays, rng=rng,
@@ -390,8 +393,7 @@ class _RowStore:
         return new
 
     def add(self, sources, rows):
-        hit = np.flatnonzero(np.any(rows > 0, axis=0))
-        vals = rows[:, hit].astype(np.float32)
+        hit, vals = compact_rows(rows)
         b = len(self.batches)
         self.batches.append((sources, hit, vals))
         self.row_sums[sources] = rows.sum(axis=1)
@@ -498,14 +500,13 @@ def _node_arrays(scene, patches, two_sided):
 class _State:
     """What relight needs: the scene, settings, patches and the kept rows."""
 
-    def __init__(self, scene, settings, patches, store, active, matrix_free, gather=None):
+    def __init__(self, scene, settings, patches, store, active, gather=None):
         self.gather = gather          # (CornerGroups, GatherRows, Elements or None), or None
         self.scene = scene
         self.settings = settings
         self.patches = patches
         self.store = store
         self.active = active
-        self.matrix_free = matrix_free
 
 
 def bake(scene, settings=None, *, progress=None, cancel=None):
@@ -636,7 +637,7 @@ def relight(result, *, reflectance=None, emission=None, progress=None, cancel=No
     monitor = Monitor(progress, cancel)
     t_start = time.perf_counter()
     warnings = []
-    if state.matrix_free:
+    if state.store is None:     # a matrix-free bake kept no form factors
         warnings.append("relight: the bake kept no form factors (matrix-free progressive): "
                         "they were recomputed")
         timings = {}
@@ -755,7 +756,7 @@ def _run(scene, settings, patches, store, active, monitor, timings, t_start, war
         node_radiance[idx] = L
         # incident power per node (radiance x area), for the energy balance and the warnings
         H = np.zeros((N, 3))
-        H[idx] = _matmul_chunked(F, L)
+        H[idx] = matvec(F, L)
         incident = H * areas[:, None]
         sent = areas[idx, None] * L                              # (n_a, 3)
         if black_block is not None:
@@ -876,7 +877,7 @@ def _run(scene, settings, patches, store, active, monitor, timings, t_start, war
     )
     if element_report is not None:
         report["elements"] = element_report
-    state = _State(scene, settings, patches, store, active, store is None, gather)
+    state = _State(scene, settings, patches, store, active, gather)
     return BakeResult(colours, patch_radiance, node_radiance, patches, report, state)
 
 
@@ -962,13 +963,6 @@ def make_reciprocal(F, areas, *, tol=RECIPROCITY_TOL, max_iterations=RECIPROCITY
         S[s:e] *= (d[s:e] / areas[s:e])[:, None].astype(S.dtype) * d[None, :].astype(S.dtype)
     info.update(sinkhorn_iterations=it, row_sum_error=err)
     return S, info
-
-
-def _matmul_chunked(F, L, chunk=512):
-    out = np.empty((F.shape[0], 3))
-    for s in range(0, F.shape[0], chunk):
-        out[s:s + chunk] = F[s:s + chunk].astype(np.float64, copy=False) @ L
-    return out
 
 
 def _faces_lit_from_behind(patches, incident, emission):

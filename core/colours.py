@@ -9,12 +9,8 @@ curved surface tessellated finer than the crease angle shades smoothly.
 import numpy as np
 
 from .constants import DEFAULT_CREASE_ANGLE
+from .geometry import within_crease
 from .patches import Patches, _check_scene
-
-#: Slack on the crease cosine: coplanar faces whose float64 normals differ by rounding (cos just
-#: below 1) must still join at crease_angle = 0.
-COS_SLACK = 1e-12
-
 
 def corner_colours(scene, patches, patch_radiance, *, crease_angle=DEFAULT_CREASE_ANGLE):
     """Outgoing radiance at every scene corner.
@@ -58,7 +54,6 @@ def corner_colours(scene, patches, patch_radiance, *, crease_angle=DEFAULT_CREAS
 
     corner_verts = np.asarray(scene.corner_verts, dtype=np.int64)
     face_starts = np.asarray(scene.face_starts, dtype=np.int64)
-    face_sizes = np.asarray(scene.face_sizes, dtype=np.int64)
     n_corners, n_verts = corner_verts.shape[0], np.asarray(scene.vertices).shape[0]
     if patches.face_patch_start.shape[0] != face_starts.shape[0] + 1:
         raise ValueError(f"patches were made for {patches.face_patch_start.shape[0] - 1} faces; "
@@ -66,10 +61,8 @@ def corner_colours(scene, patches, patch_radiance, *, crease_angle=DEFAULT_CREAS
 
     # Face of every corner (corners not used by any face keep -1 and get 0).
     corner_face = np.full(n_corners, -1, dtype=np.int64)
-    faces = np.repeat(np.arange(face_starts.shape[0], dtype=np.int64), face_sizes)
-    first = np.cumsum(face_sizes) - face_sizes
-    local = np.arange(faces.shape[0], dtype=np.int64) - first[faces]
-    corner_face[face_starts[faces] + local] = faces
+    corners, faces = scene.face_corner_indices()
+    corner_face[corners] = faces
 
     # Join corners with the incidence entries of their vertex: sort entries by vertex, then each
     # corner repeats over its vertex's run.
@@ -90,9 +83,8 @@ def corner_colours(scene, patches, patch_radiance, *, crease_angle=DEFAULT_CREAS
 
     valid = np.asarray(scene.face_valid, dtype=bool)[f]
     same_material = patches.material[p] == np.asarray(scene.face_materials, dtype=np.int64)[f]
-    cos_crease = np.cos(np.radians(angle))
-    facing = np.einsum("ij,ij->i", patches.normals[p], np.asarray(scene.face_normals)[f])
-    smooth = same_material & (facing >= cos_crease - COS_SLACK)
+    smooth = same_material & within_crease(patches.normals[p], np.asarray(scene.face_normals)[f],
+                                           angle)
     take = np.where(valid, (patches.face[p] == f) | smooth, same_material)
 
     w = patches.areas[p] * take

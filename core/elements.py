@@ -19,7 +19,7 @@ needed, and each level costs one hemicube per new element.
 
 import numpy as np
 
-from .gather import GatherRows
+from .gather import GatherRows, compact_rows, shade
 
 
 class Elements:
@@ -57,10 +57,8 @@ class Elements:
         out[:E] = L[self.parent]
         out[E:] = L[P + self.parent]
         if self.computed.size:
-            material = self.patches.material[self.computed]
-            rho = np.asarray(scene.reflectance)[material]
-            le = np.asarray(scene.emission)[material]
-            out[self.computed] = le + rho * self.rows.incident(L)
+            out[self.computed] = shade(scene, self.patches.material[self.computed],
+                                       self.rows.incident(L))
         return out
 
 
@@ -113,7 +111,6 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
     if not isinstance(levels, (int, np.integer)) or levels < 0:
         raise ValueError(f"levels must be an int >= 0; got {levels!r}")
     emission = np.asarray(scene.emission)
-    reflectance = np.asarray(scene.reflectance)
     elements = patches
     parent = np.arange(P, dtype=np.int64)          # solved patch of every element
     front = L[:P].copy()                           # current front radiance of every element
@@ -127,8 +124,12 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
             break
         elements, split_parent = subdivide_patches(elements, mask)
         remap = _survivors(mask, split_parent)
-        kept = [(remap[ids], cols, vals) for ids, cols, vals in kept]
-        kept = [(ids[ids >= 0], cols, vals[ids >= 0]) for ids, cols, vals in kept]
+        remapped = []
+        for ids, cols, vals in kept:              # per batch of rows, not per element
+            ids = remap[ids]
+            ok = ids >= 0
+            remapped.append((ids[ok], cols, vals[ok]))
+        kept = remapped
         parent = parent[split_parent]
         front = front[split_parent]
         new = np.flatnonzero(mask[split_parent])
@@ -137,11 +138,9 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
             ids = new[s:s + batch]
             rows = point_rows(patches, elements.centres[ids], elements.normals[ids],
                               resolution=resolution, rotate=rotate, rng=rng)
-            cols = np.flatnonzero(np.any(rows > 0, axis=0))
-            vals = rows[:, cols].astype(np.float32)
+            cols, vals = compact_rows(rows)
             kept.append((ids, cols, vals))
-            m = elements.material[ids]
-            front[ids] = emission[m] + reflectance[m] * (vals.astype(np.float64) @ L[cols])
+            front[ids] = shade(scene, elements.material[ids], vals.astype(np.float64) @ L[cols])
             if monitor is not None:
                 monitor.update((level + (s + ids.size) / new.size) / levels,
                                f"elements: level {level + 1}, {parent.size} elements")
@@ -150,7 +149,6 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
     store = GatherRows(computed.size, 2 * P)
     start = 0
     for ids, cols, vals in kept:
-        store.batches.append((np.arange(start, start + ids.size), cols, vals))
-        store.nbytes += vals.nbytes + cols.nbytes + 8 * ids.size
+        store.add_compact(np.arange(start, start + ids.size), cols, vals)
         start += ids.size
     return Elements(elements, parent, computed, store, steps)

@@ -14,7 +14,7 @@ the adjacent wall is seen from the surface's side instead of exactly edge-on.
 
 import numpy as np
 
-from .geometry import pairs_by_key
+from .geometry import pairs_by_key, within_crease
 
 #: The gather point is moved from the vertex towards the centroids of its group's faces by this
 #: fraction of the faces' size (sqrt of area): a fraction of a millimetre for 0.2 m faces. It
@@ -72,8 +72,7 @@ def corner_groups(scene, *, crease_angle=30.0):
 
     # All ordered pairs of valid corners at the same vertex (a vertex has few corners).
     i, j = pairs_by_key(v)
-    same = (mat[i] == mat[j]) & \
-        (np.einsum("ij,ij->i", n[i], n[j]) >= np.cos(np.radians(crease_angle)) - 1e-12)
+    same = (mat[i] == mat[j]) & within_crease(n[i], n[j], crease_angle)
     i, j = i[same], j[same]
     # Smooth normal and inward direction of each corner: area-weighted over its surface's faces.
     # A face counted once per corner it has at the vertex (always one) -- fine.
@@ -104,6 +103,17 @@ def corner_groups(scene, *, crease_angle=30.0):
     return CornerGroups(group, points, normal, mat[first_of])
 
 
+def compact_rows(rows):
+    """(cols (K,), vals (S, K) float32): the columns of ``rows`` (S, n) that any row hits."""
+    cols = np.flatnonzero(np.any(rows > 0, axis=0))
+    return cols, rows[:, cols].astype(np.float32)
+
+
+def shade(scene, material, incident):
+    """Outgoing radiance ``Le + rho * incident`` (n, 3) of receivers of ``material`` (n,)."""
+    return np.asarray(scene.emission)[material] + np.asarray(scene.reflectance)[material] * incident
+
+
 class GatherRows:
     """Point-to-node form factors of every corner group, kept compact for re-lighting."""
 
@@ -113,8 +123,13 @@ class GatherRows:
         self.nbytes = 0
 
     def add(self, groups, rows):
-        cols = np.flatnonzero(np.any(rows > 0, axis=0))
-        vals = rows[:, cols].astype(np.float32)
+        """Keep ``rows`` (S, n_nodes) of ``groups`` (S,), compacted; returns (cols, vals)."""
+        cols, vals = compact_rows(rows)
+        self.add_compact(groups, cols, vals)
+        return cols, vals
+
+    def add_compact(self, groups, cols, vals):
+        """Keep rows already compacted by :func:`compact_rows`."""
         self.batches.append((groups, cols, vals))
         self.nbytes += vals.nbytes + cols.nbytes + groups.nbytes
 
@@ -160,10 +175,7 @@ def gathered_colours(scene, groups, store, node_radiance, fallback):
     -------
     (C, 3) float64
     """
-    H = store.incident(node_radiance)
-    rho = np.asarray(scene.reflectance)[groups.material]
-    le = np.asarray(scene.emission)[groups.material]
-    L = le + rho * H
+    L = shade(scene, groups.material, store.incident(node_radiance))
     out = np.array(fallback, dtype=np.float64, copy=True)
     ok = groups.group >= 0
     out[ok] = L[groups.group[ok]]

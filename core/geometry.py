@@ -17,6 +17,36 @@ CONVEX_TURN_TOLERANCE = -1e-12
 EAR_AREA_TOLERANCE = 1e-14
 
 
+#: Slack on the crease cosine: coplanar faces whose float64 normals differ by rounding (cos just
+#: below 1) must still join at crease_angle = 0.
+CREASE_COS_SLACK = 1e-12
+
+
+def within_crease(na, nb, crease_angle):
+    """(n,) bool: unit normals ``na``, ``nb`` (n, 3) differ by at most ``crease_angle`` degrees."""
+    return np.einsum("ij,ij->i", na, nb) >= np.cos(np.radians(crease_angle)) - CREASE_COS_SLACK
+
+
+def ragged(counts):
+    """Owner, local index and owner start of every item when owner e has ``counts[e]`` items.
+
+    Parameters
+    ----------
+    counts : (E,) int
+
+    Returns
+    -------
+    owner, local : (sum(counts),) int64
+    starts : (E,) int64
+        Index of each owner's first item.
+    """
+    counts = np.asarray(counts, dtype=np.int64)
+    owner = np.repeat(np.arange(counts.shape[0], dtype=np.int64), counts)
+    starts = np.cumsum(counts) - counts
+    local = np.arange(owner.shape[0], dtype=np.int64) - starts[owner]
+    return owner, local, starts
+
+
 def _as_polygons(name, polygons):
     arr = np.asarray(polygons, dtype=np.float64)
     if arr.ndim != 3 or arr.shape[2] != 3 or arr.shape[1] < 3:

@@ -53,6 +53,7 @@ import weakref
 import numpy as np
 
 from .constants import HEMICUBE_NEAR, SURFACE_OFFSET
+from .geometry import ragged
 
 #: Face names in pixel-buffer order: the top face, then the sides along +x, -x, +y, -y of the
 #: eye frame (x, y tangent, z the viewing normal).
@@ -267,7 +268,6 @@ class _Geometry:
     def __init__(self, polys, poly_patch, normals):
         polys = np.ascontiguousarray(polys, dtype=np.float64)             # (Q, 4, 3)
         self.poly_patch = np.asarray(poly_patch, dtype=np.int64)          # (Q,)
-        self.n_polys = polys.shape[0]
         flat = polys.reshape(-1, 3)
         lo, hi = flat.min(0), flat.max(0)
         self.diag = float(np.linalg.norm(hi - lo)) or 1.0
@@ -294,7 +294,7 @@ class _Scene:
         self.poly_v_t = np.ascontiguousarray(g.poly_v[:, [0, 1, 2, 3, 0]].T)
         self.verts_t = np.ascontiguousarray(g.verts.T)                     # (3, U)
         self.plane_n_t = np.ascontiguousarray(g.plane_n.T)                 # (3, Q)
-        self.plane_n, self.plane_c, self.diag = g.plane_n, g.plane_c, g.diag
+        self.plane_c, self.diag = g.plane_c, g.diag
         self.near = HEMICUBE_NEAR * g.diag
         self.n_patches = n_patches
         self.r = resolution
@@ -344,14 +344,6 @@ def _keep(name, tag, array):
     """Keep ``array`` (returned) as this thread's buffer ``name`` with ``tag``, if small enough."""
     setattr(_BUFFER_STORE, name, (tag, array) if array.nbytes <= _BUFFER_BYTES else None)
     return array
-
-
-def _expand(counts):
-    """For items with ``counts`` (n,), return (owner (total,), rank within owner (total,))."""
-    owner = np.repeat(np.arange(counts.size), counts)
-    starts = np.cumsum(counts) - counts
-    rank = np.arange(owner.size) - starts[owner]
-    return owner, rank
 
 
 def _pixel_coords(x, y, z, face, h):
@@ -586,7 +578,7 @@ def _item_rows(zb, verts, face, pair, ps, first_id, sc, *, near_line=False, bbox
     extra = np.ceil(n_rows / slots) - 1                                   # further units
     more = np.flatnonzero(extra > 0)
     if more.size:
-        owner, rank = _expand(extra[more].astype(np.int64))
+        owner, rank, _ = ragged(extra[more])
         idx = more[owner]
         r0c = r0[idx] + _F32(slots) * (rank + 1).astype(_F32)
         more_counts = _row_slots(zb, r0c, np.take(tab, idx, axis=1), sc.r, slots)
@@ -724,7 +716,7 @@ class _ZBuffer:
             block = slice(start, start + _FRAG_BLOCK)
             # Units of _FRAG_SLOTS pixels after the first (an even step: the same parity).
             units = (np.ceil(span[block] / _F32(_FRAG_SLOTS)) - 1).astype(np.int64)
-            owner, rank = _expand(units)
+            owner, rank, _ = ragged(units)
             idx = owner + start
             step = (rank + 1) * _FRAG_SLOTS
             step_f = step.astype(_F32)
@@ -1145,7 +1137,7 @@ def point_rows(patches, points, normals, *, resolution=64, rotate=False, rng=Non
     _, n_normals, _ = _patch_geometry(patches)
     n_patches = n_normals.shape[0]
     out = np.zeros((points.shape[0], 2 * n_patches))
-    if points.shape[0] == 0 or n_patches == 0:
+    if points.shape[0] == 0:
         return out
     polys, poly_patch, geometry = _drawn(patches, n_normals)
     sc = _Scene(geometry, n_patches, resolution, False)

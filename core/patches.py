@@ -29,7 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import SettingsError
-from .geometry import newell_normals_areas, quads_convex, split_concave_quads, triangulate_polygon
+from .geometry import (newell_normals_areas, quads_convex, ragged as _ragged,
+                       split_concave_quads, triangulate_polygon)
 
 #: Relative slack in ``ceil(length / max_edge)``: an edge whose length is a whole multiple of
 #: ``max_edge`` up to float64 rounding (0.3 / 0.1 = 2.9999999999999996, 1.2 / 0.4 = 3.0000000000000004)
@@ -136,15 +137,6 @@ def _connected_labels(n, a, b):
         if np.array_equal(new, label):
             return label
         label = new
-
-
-def _ragged(counts):
-    """Owner and local index of every item when owner e has counts[e] items."""
-    counts = np.asarray(counts, dtype=np.int64)
-    owner = np.repeat(np.arange(counts.shape[0], dtype=np.int64), counts)
-    starts = np.cumsum(counts) - counts
-    local = np.arange(owner.shape[0], dtype=np.int64) - starts[owner]
-    return owner, local, starts
 
 
 def _triangular_set(limit):

@@ -66,9 +66,3 @@ class SubMonitor:
     def update(self, fraction, message=""):
         f = min(max(float(fraction), 0.0), 1.0)
         self._parent.update(self._lo + (self._hi - self._lo) * f, message)
-
-    def check(self):
-        self._parent.check()
-
-    def due(self):
-        return self._parent.due()

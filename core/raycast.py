@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .geometry import ragged
+
 #: Triangles per leaf at most. Larger leaves mean fewer wavefront levels (each level costs a few
 #: NumPy calls over all pairs) but more ray-triangle tests. Measured on room_with_boxes(2000)
 #: (3932 triangles, 40k patch-to-patch rays, CPU time): 2 -> 69k, 4 -> 66k, 8 -> 51k,
@@ -98,14 +100,6 @@ class BVH:
         return depth
 
 
-def _segment_ids(counts):
-    """For segments of the given lengths laid end to end: (segment id, offset in segment)."""
-    total = int(counts.sum())
-    seg = np.repeat(np.arange(counts.size), counts)
-    firsts = np.cumsum(counts) - counts
-    return seg, np.arange(total) - firsts[seg]
-
-
 def build_bvh(triangles):
     """Build a BVH over triangles.
 
@@ -144,7 +138,7 @@ def build_bvh(triangles):
     level_count = np.array([n_tri], dtype=np.int64)
     next_id = 1                                     # id of the first node of the next level
     while level_start.size:
-        seg, off = _segment_ids(level_count)
+        seg, off = ragged(level_count)[:2]
         slots = level_start[seg] + off              # tree slots of this level, grouped by node
         firsts = np.cumsum(level_count) - level_count
         members = order[slots]
@@ -282,7 +276,7 @@ def _traverse(bvh, o, d, dn, t_max, any_mode):
         leaf = child < 0
         lr, ln = ray[leaf], node[leaf]
         if lr.size:
-            seg, off = _segment_ids(bvh.count[ln])
+            seg, off = ragged(bvh.count[ln])[:2]
             rr = lr[seg]
             slot = bvh.start[ln][seg] + off
             t = _intersect(o[rr], d[rr], dn[rr], bvh.v0[slot], bvh.e1[slot], bvh.e2[slot],

@@ -9,7 +9,7 @@ constant across a patch and splitting it would only cost time.
 
 import numpy as np
 
-from .geometry import pairs_by_key
+from .geometry import pairs_by_key, within_crease
 
 #: Luminance weights (Rec. 709 / sRGB primaries, scene-linear) for comparing RGB radiance.
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
@@ -77,8 +77,8 @@ def refine_mask(patches, patch_radiance, emitting, *, threshold=0.1, crease_angl
     keep = a != b
     a, b = a[keep], b[keep]
     same = (patches.material[a] == patches.material[b]) & \
-        (np.einsum("ij,ij->i", patches.normals[a], patches.normals[b]) >=
-         np.cos(np.radians(crease_angle)) - 1e-12) & ~emitting[a] & ~emitting[b]
+        within_crease(patches.normals[a], patches.normals[b], crease_angle) & \
+        ~emitting[a] & ~emitting[b]
     a, b = a[same], b[same]
     diff = np.abs(y[a] - y[b]) / np.maximum(np.maximum(y[a], y[b]), floor)
     over = diff > threshold

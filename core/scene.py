@@ -12,6 +12,7 @@ import numpy as np
 
 from .constants import MAX_REFLECTANCE_EXCLUSIVE, MIN_FACE_AREA
 from .errors import SceneError
+from .geometry import ragged
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,10 +102,7 @@ class Scene:
 
 
 def _face_corner_indices(face_starts, face_sizes):
-    total = int(face_sizes.sum())
-    faces = np.repeat(np.arange(face_sizes.shape[0], dtype=np.int64), face_sizes)
-    first = np.cumsum(face_sizes) - face_sizes
-    local = np.arange(total, dtype=np.int64) - np.repeat(first, face_sizes)
+    faces, local, _ = ragged(face_sizes)
     return np.repeat(face_starts, face_sizes) + local, faces
 
 

@@ -141,6 +141,16 @@ def _rows_times(F, L, start, stop, out=None):
     return np.matmul(block, L, out=out)
 
 
+def matvec(F, L):
+    """``F @ L`` (N, 3) accumulated in float64, MATVEC_CHUNK_ROWS rows at a time (a float32 F
+    is never copied whole)."""
+    out = np.empty((F.shape[0], 3))
+    for s in range(0, F.shape[0], MATVEC_CHUNK_ROWS):
+        e = min(s + MATVEC_CHUNK_ROWS, F.shape[0])
+        _rows_times(F, L, s, e, out=out[s:e])
+    return out
+
+
 # ----------------------------------------------------------------------------- direct
 
 

@@ -68,6 +68,30 @@ def luminance(rgb):
     return _as_array("rgb", rgb, 2, 3) @ LUMINANCE_WEIGHTS
 
 
+def _face_errors(test, reference, weights, mask):
+    """The faces compared and their errors: (indices (k,), relative errors (k,), weights (k,)
+    summing to 1). Faces outside ``mask``, of zero area, or darker than ``DARK_FRACTION`` x the
+    mean reference luminance are left out."""
+    t = luminance(test)
+    r = luminance(reference)
+    w = _as_array("weights", weights, 1)
+    if len(t) != len(r) or len(w) != len(r):
+        raise ValueError("test, reference and weights must have the same length; got %d, %d, %d"
+                         % (len(t), len(r), len(w)))
+    if np.any(w < 0):
+        raise ValueError("weights must be >= 0")
+    keep = np.ones(len(r), dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    if keep.shape != r.shape:
+        raise ValueError("mask must have shape (%d,); got %s" % (len(r), keep.shape))
+    keep = keep & (w > 0)
+    if not np.any(keep):
+        raise ValueError("no face left to compare (mask and weights exclude every face)")
+    mean_ref = np.sum(w[keep] * r[keep]) / np.sum(w[keep])
+    keep &= r > DARK_FRACTION * mean_ref
+    idx = np.flatnonzero(keep)
+    return idx, (t[idx] - r[idx]) / r[idx], w[idx] / np.sum(w[idx])
+
+
 def relative_errors(test, reference, weights, mask=None):
     """Area-weighted relative RMS and 95th percentile of per-face luminance errors.
 
@@ -87,27 +111,10 @@ def relative_errors(test, reference, weights, mask=None):
         ``rms`` (relative, 0.01 = 1 %), ``p95`` (relative), ``bias`` (area-weighted mean of the
         signed relative error), ``faces`` (number of faces used).
     """
-    t = luminance(test)
-    r = luminance(reference)
-    w = _as_array("weights", weights, 1)
-    if len(t) != len(r) or len(w) != len(r):
-        raise ValueError("test, reference and weights must have the same length; got %d, %d, %d"
-                         % (len(t), len(r), len(w)))
-    if np.any(w < 0):
-        raise ValueError("weights must be >= 0")
-    keep = np.ones(len(r), dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
-    if keep.shape != r.shape:
-        raise ValueError("mask must have shape (%d,); got %s" % (len(r), keep.shape))
-    keep = keep & (w > 0)
-    if not np.any(keep):
-        raise ValueError("no face left to compare (mask and weights exclude every face)")
-    mean_ref = np.sum(w[keep] * r[keep]) / np.sum(w[keep])
-    keep &= r > DARK_FRACTION * mean_ref
-    rel = (t[keep] - r[keep]) / r[keep]
-    ww = w[keep] / np.sum(w[keep])
+    idx, rel, ww = _face_errors(test, reference, weights, mask)
     rms = float(np.sqrt(np.sum(ww * rel ** 2)))
     return {"rms": rms, "p95": weighted_quantile(np.abs(rel), ww, 0.95),
-            "bias": float(np.sum(ww * rel)), "faces": int(keep.sum())}
+            "bias": float(np.sum(ww * rel)), "faces": int(idx.size)}
 
 
 def concentration(test, reference, weights, mask=None, top=20):
@@ -122,16 +129,7 @@ def concentration(test, reference, weights, mask=None, top=20):
         ``share`` (their fraction of the mean square), ``area`` (their fraction of the area
         compared), ``rms_rest`` (the RMS over the other faces), ``faces`` (their indices).
     """
-    t = luminance(test)
-    r = luminance(reference)
-    w = _as_array("weights", weights, 1)
-    keep = np.ones(len(r), dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
-    keep = keep & (w > 0)
-    mean_ref = np.sum(w[keep] * r[keep]) / np.sum(w[keep])
-    keep &= r > DARK_FRACTION * mean_ref
-    idx = np.flatnonzero(keep)
-    rel = (t[idx] - r[idx]) / r[idx]
-    ww = w[idx] / np.sum(w[idx])
+    idx, rel, ww = _face_errors(test, reference, weights, mask)
     ms = ww * rel ** 2
     order = np.argsort(-ms, kind="stable")
     k = min(int(top), idx.size)

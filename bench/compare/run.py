@@ -199,15 +199,16 @@ def run_scene(name, blend, args, rng):
     rows = []
 
     def record(row, cc):
+        """Measure ``cc`` against the reference, keep and print the row; returns face values."""
         fv = metrics.face_values(cc, arrays["face_starts"], arrays["face_sizes"])
-        row.update(metrics.relative_errors(fv, ref_faces, area, keep) if ref_faces is not None
-                   else {})
+        row.update(metrics.relative_errors(fv, ref_faces, area, keep))
         row["scene"] = name
         rows.append(row)
         print("  %-8s %-12s %-8s R=%-4s ps=%-5s spp=%-5s t=%8.2fs rms=%s" % (
             row["engine"], row.get("method", ""), row.get("solver", ""),
             row.get("resolution", ""), row.get("patch_size", ""), row.get("samples", ""),
-            row["t_total"], "%.4f" % row["rms"] if "rms" in row else "-"), flush=True)
+            row["t_total"], "%.4f" % row["rms"]), flush=True)
+        return fv
 
     # Cycles: every sample count, two seeds; the reference is the mean of the top count's seeds.
     samples = sorted(args.cycles_samples)
@@ -275,11 +276,9 @@ def run_scene(name, blend, args, rng):
         fm = fm / np.where(fa > 0, fa, 1.0)[:, None]
         e = metrics.relative_errors(fm, ref_faces, area, keep & (fa > 0))
         row.update(rms_patch=e["rms"], p95_patch=e["p95"])
-        record(row, res.corner_colours)
-        if label.startswith("hemicube, ") and kw.get("resolution") == 64 and ref_faces is not None:
-            c = metrics.concentration(
-                metrics.face_values(res.corner_colours, arrays["face_starts"],
-                                    arrays["face_sizes"]), ref_faces, area, keep)
+        fv = record(row, res.corner_colours)
+        if label.startswith("hemicube, ") and kw.get("resolution") == 64:
+            c = metrics.concentration(fv, ref_faces, area, keep)
             names = sorted({str(arrays["object_names"][arrays["face_objects"][f]])
                             for f in c["faces"]}) if "object_names" in arrays else []
             print("    the 20 worst faces (%.1f %% of the area; objects %s) carry %.0f %% of the "
