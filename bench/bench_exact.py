@@ -84,8 +84,9 @@ def main():
 
     src = rng.choice(2 * p, 4, replace=False)
     for rays in (4, 16):
-        t = best_time(lambda: exact_rows(pat, src, rays=rays, bvh=bvh), repeat=1)
+        t0 = time.process_time()
         rows = exact_rows(pat, src, rays=rays, bvh=bvh)
+        t = time.process_time() - t0
         ff = point_polygon_form_factor(pat.centres[src % p],
                                        pat.normals[src % p] * np.where(src < p, 1, -1)[:, None],
                                        pat.corners)
@@ -102,12 +103,13 @@ def main():
           f"{'exact 3x3':>10s} {'adaptive':>10s}")
     sq = lambda z, flip: (np.array([[0, 0, z], [0, 1, z], [1, 1, z], [1, 0, z]], float) if flip
                           else np.array([[0, 0, z], [1, 0, z], [1, 1, z], [0, 1, z]], float))
-    def compare(label, dist, pt, ref):
-        """One table row: F(1->2) of patch pair ``pt`` by each method against ``ref``."""
-        hc = hemicube_rows(pt, [0], resolution=64)[0, 1]
-        ec = exact_rows(pt, [0])[0, 1]
-        e3 = exact_rows(pt, [0], source_order=3)[0, 1]
-        ea = exact_rows(pt, [0], source_order="adaptive")[0, 1]
+    def compare(label, dist, pt, ref, col=1):
+        """One table row: F(1 -> node ``col``) of patch pair ``pt`` by each method against
+        ``ref`` (col 1: the second patch's front, 3: its back)."""
+        hc = hemicube_rows(pt, [0], resolution=64)[0, col]
+        ec = exact_rows(pt, [0])[0, col]
+        e3 = exact_rows(pt, [0], source_order=3)[0, col]
+        ea = exact_rows(pt, [0], source_order="adaptive")[0, col]
         print(f"{label:26s} {dist:9.2f} {hc / ref - 1:+13.4f} {ec / ref - 1:+13.4f} "
               f"{e3 / ref - 1:+10.2e} {ea / ref - 1:+10.2e}")
 
@@ -123,16 +125,11 @@ def main():
     ceil_q = np.array([[2.0, 1.3, 3.0], [2.0, 1.3 + s_, 3.0], [2.0 + s_, 1.3 + s_, 3.0],
                        [2.0 + s_, 1.3, 3.0]])
     panel = np.array([[2.4, 1.7, 2.95], [2.4, 2.3, 2.95], [3.0, 2.3, 2.95], [3.0, 1.7, 2.95]])
-    pt = two_quads(ceil_q, panel)
     g = (np.arange(600) + 0.5) / 600
     pts = ceil_q[0] + g[:, None, None] * [s_, 0, 0] + g[None, :, None] * [0, s_, 0]
     ref = point_polygon_form_factor(pts.reshape(-1, 3), np.tile([0, 0, -1.0], (360000, 1)),
                                     panel[None]).mean()
-    vals = [hemicube_rows(pt, [0], resolution=64)[0, 3],
-            exact_rows(pt, [0])[0, 3], exact_rows(pt, [0], source_order=3)[0, 3],
-            exact_rows(pt, [0], source_order="adaptive")[0, 3]]
-    print(f"{'ceiling over panel (back)':26s} {0.81:9.2f} {vals[0] / ref - 1:+13.4f} "
-          f"{vals[1] / ref - 1:+13.4f} {vals[2] / ref - 1:+10.2e} {vals[3] / ref - 1:+10.2e}")
+    compare("ceiling over panel (back)", 0.81, two_quads(ceil_q, panel), ref, col=3)
 
     print("\n== hybrid cost on the room (same 4 sources) ==")
     for near in (0.0, 2.0, 4.0, 6.0):

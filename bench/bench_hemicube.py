@@ -36,11 +36,16 @@ def room_patches(n_quads):
     return make_patches(scene, max_edge=100.0)
 
 
-def run(patches, sources, resolution, batch, *, rotate=False):
-    """(wall s, CPU s) per source and per-stage CPU timings (dict) for ``sources`` in batches."""
-    # The per-scene setup is made once, as hemicube_rows caches it across a bake's calls.
+def setup(patches):
+    """(polys, poly_patch, _Geometry): the per-scene setup, made once per scene as
+    hemicube_rows caches it across a bake's calls."""
     polys, poly_patch = draw_polygons(patches)
-    geometry = _Geometry(polys, poly_patch, patches.normals)
+    return polys, poly_patch, _Geometry(polys, poly_patch, patches.normals)
+
+
+def run(patches, drawn, sources, resolution, batch, *, rotate=False):
+    """(wall s, CPU s) per source and per-stage CPU timings (dict) for ``sources`` in batches."""
+    polys, poly_patch, geometry = drawn
     args = (polys, poly_patch, patches.centres, patches.normals, patches.corners)
     rng = np.random.default_rng(1)
     kw = dict(resolution=resolution, rotate=rotate, rng=rng, _geometry=geometry)
@@ -53,9 +58,9 @@ def run(patches, sources, resolution, batch, *, rotate=False):
     return wall / sources.size, cpu / sources.size, timings
 
 
-def peak_memory(patches, sources, resolution, batch):
+def peak_memory(patches, drawn, sources, resolution, batch):
     """Peak traced memory (bytes) of one call with ``batch`` sources."""
-    polys, poly_patch = draw_polygons(patches)
+    polys, poly_patch, _ = drawn
     tracemalloc.start()
     polygon_rows(polys, poly_patch, patches.centres, patches.normals, patches.corners,
                  sources[:batch], resolution=resolution)
@@ -81,12 +86,13 @@ def main():
     for n_quads in args.sizes:
         patches = room_patches(n_quads)
         p = patches.centres.shape[0]
-        t = draw_polygons(patches)[0].shape[0]
+        drawn = setup(patches)
+        t = drawn[0].shape[0]
         rng = np.random.default_rng(0)
         sources = rng.choice(p, size=min(args.sources, p), replace=False)
         for res in args.res:
-            wall, cpu, tm = run(patches, sources, res, args.batch)
-            peak = peak_memory(patches, sources, res, args.batch)
+            wall, cpu, tm = run(patches, drawn, sources, res, args.batch)
+            peak = peak_memory(patches, drawn, sources, res, args.batch)
             stage_total = sum(tm[s] for s in STAGES)
             split = " ".join(f"{100 * tm[s] / stage_total:6.1f}%" for s in STAGES)
             ns = sources.size
@@ -101,7 +107,7 @@ def main():
         sources = np.random.default_rng(0).choice(patches.centres.shape[0], 200, replace=False)
         prof = cProfile.Profile()
         prof.enable()
-        run(patches, sources, 64, args.batch)
+        run(patches, setup(patches), sources, 64, args.batch)
         prof.disable()
         pstats.Stats(prof).sort_stats("tottime").print_stats(15)
 

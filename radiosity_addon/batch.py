@@ -129,14 +129,12 @@ def run(argv):
         raise BatchError("--render needs a scene camera; the scene has none")
 
     from . import register
-    from .job import BakeError, bake_now, options_from_props
+    from .job import CORE_OPTIONS, BakeError, bake_now, options_from_props
 
     if not hasattr(bpy.types.Scene, "radiosity"):
         register()
     options = options_from_props(bpy.context.scene.radiosity)
-    for key in ("patch_size", "method", "resolution", "solver", "tolerance", "max_iterations",
-                "corners", "refine_levels", "element_levels", "selected_only",
-                "make_single_user"):
+    for key in CORE_OPTIONS + ("selected_only", "make_single_user"):
         value = getattr(args, key)
         if value is not None:
             options[key] = value

@@ -148,6 +148,7 @@ def extract(depsgraph, *, selected_only=False):
     nv = nc = 0
     no_material = []
     ignored = []
+    unsupported = {}             # light type -> names of lights we cannot bake
 
     def material_index(mat):
         key = None if mat is None else mat.original.name_full
@@ -177,6 +178,9 @@ def extract(depsgraph, *, selected_only=False):
             continue
         if obj.type == "LIGHT":
             if obj.original.hide_render:
+                continue
+            if obj.data.type != "AREA":
+                unsupported.setdefault(obj.data.type.capitalize(), []).append(obj.name)
                 continue
             _add_light(inst, unit, out, add_faces, object_names, rho, le, mat_keys, one_sided)
             continue
@@ -222,7 +226,8 @@ def extract(depsgraph, *, selected_only=False):
     world_note = _world_warning(scene)
     if world_note:
         out.warnings.append(world_note)
-    out.warnings.extend(_light_warnings(depsgraph))
+    out.warnings.extend(f"{kind} lights are not supported yet and were ignored: {_names(names)}"
+                        for kind, names in unsupported.items())
     out.notes.extend(reader.notes)
     if verts:
         out.arrays = dict(
@@ -243,8 +248,6 @@ def extract(depsgraph, *, selected_only=False):
 
 def _add_light(inst, unit, out, add_faces, object_names, rho, le, mat_keys, one_sided):
     light = inst.object.data
-    if light.type != "AREA":
-        return  # reported by _light_warnings
     local, local_area = area_light_polygon(light)
     raw = np.array(inst.matrix_world, dtype=np.float64)
     pts = transform(local, unit @ raw)
@@ -278,16 +281,6 @@ def _names(names, limit=5):
     uniq = list(dict.fromkeys(names))
     text = ", ".join(f"'{n}'" for n in uniq[:limit])
     return text + (f" and {len(uniq) - limit} more" if len(uniq) > limit else "")
-
-
-def _light_warnings(depsgraph):
-    unsupported = {}
-    for inst in depsgraph.object_instances:
-        obj = inst.object
-        if obj.type == "LIGHT" and obj.data.type != "AREA" and not obj.original.hide_render:
-            unsupported.setdefault(obj.data.type.capitalize(), []).append(obj.name)
-    return [f"{kind} lights are not supported yet and were ignored: {_names(names)}"
-            for kind, names in unsupported.items()]
 
 
 def _world_warning(scene):

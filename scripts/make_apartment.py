@@ -76,5 +76,4 @@ def build_apartment(face_size=0.13):
 
 
 if __name__ == "__main__":
-    sys.argv[1:1] = [] if "--face-size" in sys.argv else ["--face-size", "0.13"]
-    main(build=build_apartment, default_out="sample_blends/apartment.blend")
+    main(build=build_apartment, default_out="sample_blends/apartment.blend", face_size=0.13)

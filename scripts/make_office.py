@@ -176,10 +176,10 @@ def build_office(face_size=0.2):
     add_camera((5.6, 0.4, 1.6), (1.5, 3.2, 1.0))
 
 
-def main(argv=None, build=build_office, default_out="sample_blends/office.blend"):
+def main(argv=None, build=build_office, default_out="sample_blends/office.blend", face_size=0.2):
     import bpy
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--face-size", type=float, default=0.2, help="max face edge (m)")
+    ap.add_argument("--face-size", type=float, default=face_size, help="max face edge (m)")
     ap.add_argument("--out", default=str(ROOT / default_out))
     args = ap.parse_args(argv)
     if not args.face_size > 0:
