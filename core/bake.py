@@ -167,6 +167,11 @@ class BakeSettings:
     element_threshold : float
         Relative luminance difference between neighbours that splits them into elements, in
         (0, 1).
+    contact_cuts : bool
+        Cut patches along the lines where other surfaces touch or pierce them (an object on a
+        floor, a shelf in its side panels; :mod:`core.contacts`) before the solve. Without it, a
+        patch straddling an object's outline carries one radiance for its lit and its covered
+        part: light leaks into the object and its foot comes out too dark.
     corners : str
         How corner colours are made from the solution. ``'gather'`` (default): a final gather
         at every vertex (:mod:`core.gather`), the radiance at the vertex itself, as Cycles bakes
@@ -194,6 +199,7 @@ class BakeSettings:
     corners: str = "gather"
     element_levels: int = 2
     element_threshold: float = 0.3
+    contact_cuts: bool = True
 
     def __post_init__(self):
         def bad(name, allowed):
@@ -236,6 +242,8 @@ class BakeSettings:
             bad("element_threshold", "a number in (0, 1)")
         if not _is_real(self.refine_threshold) or not 0 < self.refine_threshold < 1:
             bad("refine_threshold", "a number in (0, 1)")
+        if not isinstance(self.contact_cuts, (bool, np.bool_)):
+            bad("contact_cuts", "True or False")
         if not _is_real(self.near) or self.near < 0:
             bad("near", "a finite number >= 0 (times the larger patch size)")
 
@@ -500,8 +508,9 @@ def _node_arrays(scene, patches, two_sided):
 class _State:
     """What relight needs: the scene, settings, patches and the kept rows."""
 
-    def __init__(self, scene, settings, patches, store, active, gather=None):
+    def __init__(self, scene, settings, patches, store, active, gather=None, alone=None):
         self.gather = gather          # (CornerGroups, GatherRows, Elements or None), or None
+        self.alone = alone            # vertices gathered per corner (contacts), or None
         self.scene = scene
         self.settings = settings
         self.patches = patches
@@ -542,10 +551,19 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     level_monitor.update(0.0, "patches")
     t0 = time.perf_counter()
     patches = make_patches(scene, settings.patch_size)
+    contacts = alone = None
+    if settings.contact_cuts:
+        from .contacts import find_contacts, split_at_contacts
+        found = find_contacts(scene, patches)
+        patches, _, contacts = split_at_contacts(scene, patches, found)
+        alone = found.vertices
     timings["patches"] = time.perf_counter() - t0
     level_monitor.update(1.0, f"{len(patches.areas)} patches")
 
-    result = _run(scene, settings, patches, None, None, level_monitor, timings, t_start, [])
+    result = _run(scene, settings, patches, None, None, level_monitor, timings, t_start, [],
+                  alone=alone)
+    if contacts is not None:
+        result.report["contacts"] = contacts
     if levels == 0:
         return result
     from .patches import subdivide_patches
@@ -568,12 +586,14 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
                           split=int(np.count_nonzero(mask))))
         level_monitor = _LevelMonitor(progress, cancel, level, levels + 1)
         result = _run(scene, settings, patches, None, None, level_monitor,
-                      {"patches": t_split}, time.perf_counter(), [])
+                      {"patches": t_split}, time.perf_counter(), [], alone=alone)
         for key, value in result.report["timings"].items():
             total[key] = total.get(key, 0.0) + value
     total["total"] = time.perf_counter() - t_start
     result.report["timings"] = total
     result.report["refinement"] = steps
+    if contacts is not None:
+        result.report["contacts"] = contacts
     return result
 
 
@@ -645,14 +665,14 @@ def relight(result, *, reflectance=None, emission=None, progress=None, cancel=No
         monitor.update(1.0, "patches")
         timings["patches"] = 0.0
         return _run(new_scene, state.settings, state.patches, None, None, monitor, timings,
-                    t_start, warnings)
+                    t_start, warnings, alone=state.alone)
     timings = {"patches": 0.0}
     return _run(new_scene, state.settings, state.patches, state.store, state.active, monitor,
-                timings, t_start, warnings, gather=state.gather)
+                timings, t_start, warnings, gather=state.gather, alone=state.alone)
 
 
 def _run(scene, settings, patches, store, active, monitor, timings, t_start, warnings,
-         gather=None):
+         gather=None, alone=None):
     """Form factors (discovery, reusing ``store``), solve, colours, report."""
     from .colours import corner_colours
 
@@ -819,7 +839,7 @@ def _run(scene, settings, patches, store, active, monitor, timings, t_start, war
                     rng=np.random.default_rng([settings.seed, 3]),
                     monitor=SubMonitor(monitor, 0.0, ELEMENT_SHARE))
                 seen = elements.patches
-            groups = corner_groups(scene, crease_angle=settings.crease_angle)
+            groups = corner_groups(scene, crease_angle=settings.crease_angle, alone=alone)
             sub = SubMonitor(monitor, ELEMENT_SHARE if elements is not None else 0.0, 1.0)
             store_g = gather_rows(seen, groups, resolution=settings.resolution,
                                   rotate=settings.rotate_hemicube,
@@ -877,7 +897,7 @@ def _run(scene, settings, patches, store, active, monitor, timings, t_start, war
     )
     if element_report is not None:
         report["elements"] = element_report
-    state = _State(scene, settings, patches, store, active, gather)
+    state = _State(scene, settings, patches, store, active, gather, alone)
     return BakeResult(colours, patch_radiance, node_radiance, patches, report, state)
 
 
@@ -886,6 +906,13 @@ def _run(scene, settings, patches, store, active, monitor, timings, t_start, war
 #: buys is not lost, and reached in ~100 sweeps on room_with_boxes(2000) (1e-6 took 258).
 RECIPROCITY_TOL = 1e-5
 RECIPROCITY_MAX_ITERATIONS = 500
+#: A node whose row sum is still off by more than this after the Sinkhorn iterations cannot be
+#: balanced with the others (see make_reciprocal) and keeps its own row and column.
+SINKHORN_FAIL = 1e-3
+#: Sinkhorn scales stay within this factor of their starting value.
+SINKHORN_RANGE = 1e4
+#: Passes of make_reciprocal's Sinkhorn scaling, each dropping the nodes found unbalanceable.
+SINKHORN_PASSES = 6
 _BLOCK = 1024
 
 
@@ -944,25 +971,72 @@ def make_reciprocal(F, areas, *, tol=RECIPROCITY_TOL, max_iterations=RECIPROCITY
         e = min(s + _BLOCK, n)
         ai = a[s:e, None]
         S[s:e] = ai * a[None, :] * (F[s:e] + F[:, s:e].T) / (ai + a[None, :])
-    d = np.zeros(n)
-    live = target > 0
-    rs = S.sum(axis=1, dtype=np.float64)
-    d[live] = np.sqrt(target[live] / rs[live])
-    it = 0
-    err = 0.0
-    for it in range(1, max_iterations + 1):
-        r = d * (S @ d.astype(S.dtype)).astype(np.float64)
-        err = float(np.max(np.abs(r[live] - target[live]) / target[live])) if live.any() else 0.0
-        if err <= tol:
+    # Nodes that cannot be balanced keep their own rows and columns: nodes without a partner
+    # (their row hits only nodes that see nothing), and groups whose row sums cannot all be met by
+    # a symmetric scaling: two sets of patches shut inside a solid, each seeing mostly through the
+    # near walls and the other set only a little, have no solution (their scales diverge). The
+    # a pass that finds such nodes drops them, and the next balances the rest without them.
+    alone = np.zeros(n, dtype=bool)
+    for attempt in range(1, SINKHORN_PASSES + 1):
+        live = (target > 0) & ~alone
+        while True:
+            partnered = live & (S @ live.astype(S.dtype) > 0)
+            if np.array_equal(partnered, live):
+                break
+            live = partnered
+        alone |= (target > 0) & ~live
+        d, it, err, pinned = _sinkhorn(S, target, live, tol, max_iterations, monitor)
+        failed = pinned if pinned.any() else live & ~(err <= SINKHORN_FAIL)
+        if attempt == SINKHORN_PASSES or not failed.any():
             break
-        d[live] *= np.sqrt(target[live] / r[live])
-        if monitor is not None and monitor.due():
-            monitor.update(0.0, "making form factors reciprocal")
+        alone |= failed
+        idx = np.flatnonzero(alone)
+        S[idx] = 0
+        S[:, idx] = 0
+        target = areas * (F.sum(axis=1, dtype=np.float64)
+                          - F[:, idx].sum(axis=1, dtype=np.float64))
+        target[idx] = 0.0
     for s in range(0, n, _BLOCK):
         e = min(s + _BLOCK, n)
         S[s:e] *= (d[s:e] / areas[s:e])[:, None].astype(S.dtype) * d[None, :].astype(S.dtype)
-    info.update(sinkhorn_iterations=it, row_sum_error=err)
+    idx = np.flatnonzero(alone)
+    if idx.size:
+        S[idx] = F[idx]
+        S[:, idx] = F[:, idx]
+    err = float(np.max(err[live])) if live.any() else 0.0
+    info.update(sinkhorn_iterations=it, row_sum_error=err, unscaled=int(idx.size))
     return S, info
+
+
+def _sinkhorn(S, target, live, tol, max_iterations, monitor):
+    """Symmetric Sinkhorn: d with ``d_i sum_j S_ij d_j = target_i`` over the live nodes.
+
+    Returns (d, iterations, relative row error per node, pinned). Scales are held within
+    ``SINKHORN_RANGE`` of their start, so that a group without a solution stays finite instead of
+    overflowing into every row through the product; the iteration stops as soon as a scale
+    reaches that bound, and ``pinned`` marks the nodes that did.
+    """
+    n = S.shape[0]
+    d = np.zeros(n)
+    rs = S.sum(axis=1, dtype=np.float64)
+    d[live] = np.sqrt(target[live] / rs[live])
+    lo, hi = d / SINKHORN_RANGE, d * SINKHORN_RANGE
+    err = np.zeros(n)
+    it = 0
+    safe = np.where(live, target, 1.0)
+    for it in range(1, max_iterations + 1):
+        r = d * (S @ d.astype(S.dtype)).astype(np.float64)
+        err = np.where(live, np.abs(r - target) / safe, 0.0)
+        if float(err.max(initial=0.0)) <= tol:
+            break
+        ok = live & (r > 0)
+        d[ok] = np.clip(d[ok] * np.sqrt(target[ok] / r[ok]), lo[ok], hi[ok])
+        pinned = ok & ((d <= lo) | (d >= hi))
+        if pinned.any():
+            return d, it, err, pinned
+        if monitor is not None and monitor.due():
+            monitor.update(0.0, "making form factors reciprocal")
+    return d, it, err, np.zeros(n, dtype=bool)
 
 
 def _faces_lit_from_behind(patches, incident, emission):

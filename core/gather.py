@@ -42,7 +42,7 @@ class CornerGroups:
         self.group, self.points, self.normals, self.material = group, points, normals, material
 
 
-def corner_groups(scene, *, crease_angle=30.0):
+def corner_groups(scene, *, crease_angle=30.0, alone=None):
     """Group the scene's corners for the final gather (vectorised join by vertex).
 
     Parameters
@@ -50,6 +50,11 @@ def corner_groups(scene, *, crease_angle=30.0):
     scene : core.scene.Scene
     crease_angle : float
         Degrees: faces at a vertex whose normals differ by more are separate surfaces.
+    alone : (V,) bool, optional
+        Vertices whose corners are not grouped: each gathers on its own, with its face's normal,
+        from a point moved into its own face. For vertices on a contact line
+        (:class:`core.contacts.Contacts`): the floor corner of a face under a box must see the
+        box's inside, the corner of the face beside it the room.
 
     Returns
     -------
@@ -73,6 +78,8 @@ def corner_groups(scene, *, crease_angle=30.0):
     # All ordered pairs of valid corners at the same vertex (a vertex has few corners).
     i, j = pairs_by_key(v)
     same = (mat[i] == mat[j]) & within_crease(n[i], n[j], crease_angle)
+    single = np.zeros(valid_c.size, dtype=bool) if alone is None else np.asarray(alone)[v]
+    same &= ~single[i] | (i == j)
     i, j = i[same], j[same]
     # Smooth normal and inward direction of each corner: area-weighted over its surface's faces.
     # A face counted once per corner it has at the vertex (always one) -- fine.
@@ -87,8 +94,9 @@ def corner_groups(scene, *, crease_angle=30.0):
     np.add.at(w, i, 1.0)
     size /= w
 
+    own = np.where(single, np.arange(valid_c.size), -1).astype(np.float64)
     key = np.concatenate([v[:, None].astype(np.float64), mat[:, None].astype(np.float64),
-                          np.round(sn, NORMAL_DECIMALS)], axis=1)
+                          np.round(sn, NORMAL_DECIMALS), own[:, None]], axis=1)
     _, first_of, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
     inverse = inverse.reshape(-1)
     direction = inward[first_of]

@@ -65,6 +65,8 @@ def build_parser(need_input):
     p.add_argument("--corners", choices=["gather", "average"])
     p.add_argument("--refine-levels", type=int, choices=range(0, 5), metavar="0..4")
     p.add_argument("--element-levels", type=int, choices=range(0, 4), metavar="0..3")
+    p.add_argument("--no-contact-cuts", dest="contact_cuts", action="store_false", default=None,
+                   help="do not cut patches along contact lines (objects on surfaces)")
     p.add_argument("--selected-only", action="store_true", default=None)
     p.add_argument("--make-single-user", action="store_true", default=None)
     return p

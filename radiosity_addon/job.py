@@ -21,7 +21,7 @@ from .write import WriteError, check_writable, show_in_viewports, write_colours
 
 #: Bake options that come from the panel / the batch command line and go to core.BakeSettings.
 CORE_OPTIONS = ("patch_size", "method", "resolution", "solver", "tolerance", "max_iterations",
-                "corners", "refine_levels", "element_levels")
+                "corners", "refine_levels", "element_levels", "contact_cuts")
 
 
 class BakeError(RuntimeError):
@@ -46,7 +46,7 @@ def options_from_props(props):
                 resolution=props.resolution, solver=props.solver.lower(),
                 tolerance=props.tolerance, max_iterations=props.max_iterations,
                 corners=props.corners.lower(), refine_levels=props.refine_levels,
-                element_levels=props.element_levels,
+                element_levels=props.element_levels, contact_cuts=props.contact_cuts,
                 selected_only=props.selected_only, make_single_user=props.make_single_user)
 
 

@@ -30,6 +30,7 @@ class VIEW3D_PT_radiosity(bpy.types.Panel):
         sub = col.column()
         sub.active = props.corners == "GATHER"
         sub.prop(props, "element_levels")
+        col.prop(props, "contact_cuts")
         col.prop(props, "tolerance")
         col.prop(props, "max_iterations")
         col.prop(props, "selected_only")

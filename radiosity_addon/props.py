@@ -51,6 +51,11 @@ class RadiositySettings(bpy.types.PropertyGroup):
         name="Receiver Levels", default=2, min=0, max=3,
         description="After the solve, split patches where the light changes into smaller "
                     "receivers for the vertex colours, this many times (no re-solve; 0: off)")
+    contact_cuts: BoolProperty(
+        name="Cut at Contacts", default=True,
+        description="Cut patches along the lines where objects touch or pierce a surface (a "
+                    "box on a floor), so no light leaks under objects and their feet are not "
+                    "too dark")
     tolerance: FloatProperty(name="Tolerance", description="Relative residual to stop at",
                              default=DEFAULT_TOLERANCE, min=1e-9, max=0.5, precision=6)
     max_iterations: IntProperty(name="Iteration Cap", default=DEFAULT_MAX_ITERATIONS, min=1)

@@ -117,6 +117,38 @@ def relative_errors(test, reference, weights, mask=None):
             "bias": float(np.sum(ww * rel)), "faces": int(idx.size)}
 
 
+def reference_noise(seeds, weights, mask=None):
+    """Noise of the mean of independent bakes (seeds), as the relative RMS error it carries.
+
+    Per face: the sample variance of the seeds' luminance over N - 1, divided by N (the variance
+    of their mean), relative to the mean's luminance; then area-weighted like
+    :func:`relative_errors`. For two seeds this is |a - b| / 2 per face.
+
+    Parameters
+    ----------
+    seeds : (N, F, 3) float
+        Per-face colours of N >= 2 bakes that differ only in their seed.
+    weights : (F,) float
+    mask : (F,) bool, optional
+
+    Returns
+    -------
+    dict
+        ``rms``, ``p95`` (relative noise of the mean), ``faces``, ``seeds``.
+    """
+    x = np.asarray(seeds, dtype=np.float64)
+    if x.ndim != 3 or x.shape[0] < 2 or x.shape[2] != 3:
+        raise ValueError("seeds must have shape (N >= 2, F, 3); got %s" % (x.shape,))
+    n = x.shape[0]
+    mean = x.mean(axis=0)
+    lum = np.stack([luminance(s) for s in x])
+    sd_mean = np.sqrt(lum.var(axis=0, ddof=1) / n)
+    idx, _, ww = _face_errors(mean, mean, weights, mask)
+    rel = sd_mean[idx] / luminance(mean)[idx]
+    return {"rms": float(np.sqrt(np.sum(ww * rel ** 2))),
+            "p95": weighted_quantile(rel, ww, 0.95), "faces": int(idx.size), "seeds": n}
+
+
 def concentration(test, reference, weights, mask=None, top=20):
     """How much of the squared error a few faces carry.
 

@@ -10,9 +10,9 @@ Writes ``bench/results/<scene>.csv`` (one row per run) and ``bench/results/<scen
 against wall time, log-log, one curve per method and one for Cycles, Pareto front marked), and
 ``bench/results/<scene>_radiance.csv`` (illuminance at sensor points: ours, Cycles', Radiance's).
 
-Reference: the mean of two Cycles seeds at the largest sample count of the run (its own noise is
-estimated from the two seeds and written in the CSV as the ``reference`` row: the error of any run
-cannot be measured below it). Error: area-weighted relative RMS of per-face luminance (face = mean
+Reference: the mean of ``--reference-seeds`` Cycles seeds (default 2) at the largest sample count
+of the run (its own noise is estimated from the seeds' spread and written in the CSV as the
+``reference`` row: the error of any run cannot be measured below it). Error: area-weighted relative RMS of per-face luminance (face = mean
 of its corners), emitters excluded, and the 95th percentile (bench/compare/metrics.py).
 """
 
@@ -104,6 +104,11 @@ def our_sweep(face_size, args):
         runs.append(("hemicube R64, elements %d" % levels,
                      dict(patch_size=sizes[0], method="hemicube", resolution=64,
                           element_levels=levels)))
+    # Contact cuts (default on) against none.
+    if not args.no_contact_run:
+        runs.append(("hemicube R64, no contact cuts",
+                     dict(patch_size=sizes[0], method="hemicube", resolution=64,
+                          contact_cuts=False)))
     # Corner colours: the final gather (default) against the patch average it replaced, and
     # adaptive refinement from twice the face size.
     runs.append(("hemicube R64, corners averaged",
@@ -216,8 +221,10 @@ def run_scene(name, blend, args, rng):
     cache = Path(args.out) / "cache"
     cache.mkdir(exist_ok=True)
     stamp = "%s_%d" % (name, int(Path(blend).stat().st_mtime))
+    top = samples[-1]
+    n_ref = max(2, args.reference_seeds)
     for spp in samples:
-        for seed in (0, 1):
+        for seed in range(n_ref if spp == top else 2):
             # Cycles bakes are cached per (.blend mtime, samples, seed): a rerun of the sweep
             # (e.g. after a core change) does not pay for the reference again. Delete the
             # cache folder to re-time Cycles.
@@ -232,18 +239,18 @@ def run_scene(name, blend, args, rng):
             cpu = _cpu_seconds() - cpu
             np.savez(f, cc=cc, seconds=sec, cpu=cpu)
             cyc[spp, seed] = (cc, sec, cpu)
-    top = samples[-1]
-    ref_cc = 0.5 * (cyc[top, 0][0] + cyc[top, 1][0])
+    # The reference: the mean of the top count's seeds; its noise from their spread.
+    ref_cc = np.mean([cyc[top, seed][0] for seed in range(n_ref)], axis=0)
     ref_faces = metrics.face_values(ref_cc, arrays["face_starts"], arrays["face_sizes"])
-    # Noise of the reference: half the seed-to-seed difference (the mean of two seeds has 1/sqrt 2
-    # of one seed's noise; one seed's noise is the difference / sqrt 2).
-    fa = metrics.face_values(cyc[top, 0][0], arrays["face_starts"], arrays["face_sizes"])
-    fb = metrics.face_values(cyc[top, 1][0], arrays["face_starts"], arrays["face_sizes"])
-    noise = metrics.relative_errors(fa, fb, area, keep)
-    rows.append(dict(scene=name, engine="reference", method="cycles-2seeds", samples=top,
-                     t_total=cyc[top, 0][1] + cyc[top, 1][1], rms=noise["rms"] / 2,
-                     p95=noise["p95"] / 2, bias=0.0, faces=noise["faces"]))
-    print("  reference noise (2 seeds at %d spp): %.4f rms" % (top, noise["rms"] / 2))
+    seed_faces = [metrics.face_values(cyc[top, seed][0], arrays["face_starts"],
+                                      arrays["face_sizes"]) for seed in range(n_ref)]
+    noise = metrics.reference_noise(seed_faces, area, keep)
+    rows.append(dict(scene=name, engine="reference", method="cycles-%dseeds" % n_ref,
+                     samples=top, t_total=sum(cyc[top, s][1] for s in range(n_ref)),
+                     rms=noise["rms"], p95=noise["p95"], bias=0.0, faces=noise["faces"]))
+    print("  reference noise (%d seeds at %d spp): %.4f rms" % (n_ref, top, noise["rms"]))
+    # Only seeds 0 and 1 are runs of the sweep; the others only sharpen the reference.
+    cyc = {key: value for key, value in cyc.items() if key[1] < 2}
     for (spp, seed), (cc, sec, cpu) in sorted(cyc.items()):
         record(dict(engine="cycles", method="path", samples=spp, seed=seed, t_total=sec,
                     cpu=cpu, patches=F), cc)
@@ -414,6 +421,11 @@ def main(argv=None):
     ap.add_argument("--memory-budget-gb", type=float, default=None,
                     help="memory_budget of our bakes in GiB (default: BakeSettings' 1 GiB; the "
                          "apartment needs ~4 for a dense solve instead of matrix-free shooting)")
+    ap.add_argument("--no-contact-run", action="store_true",
+                    help="skip the run without contact cuts")
+    ap.add_argument("--reference-seeds", type=int, default=2,
+                    help="Cycles seeds at the top sample count averaged into the reference "
+                         "(>= 2; the noise of their mean is estimated from their spread)")
     ap.add_argument("--no-cache", action="store_true", help="re-bake Cycles even if cached")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results"))
     ap.add_argument("--seed", type=int, default=0, help="seed of the sensor choice")

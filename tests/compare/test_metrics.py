@@ -86,3 +86,28 @@ def test_concentration_sets_the_worst_faces_apart():
     assert c["area"] == pytest.approx(0.2)
     assert c["rms_rest"] == pytest.approx(0.01)
     assert c["share"] == pytest.approx(0.25 / (0.25 + 4 * 1e-4))
+
+
+def test_reference_noise_two_seeds_is_half_their_difference():
+    a = np.ones((3, 3)) * np.array([[1.0], [2.0], [4.0]])
+    b = a * np.array([[1.1], [0.8], [1.0]])
+    area = np.array([1.0, 1.0, 2.0])
+    got = metrics.reference_noise([a, b], area)
+    mean = (a + b)[:, 0] / 2
+    rel = np.abs(a - b)[:, 0] / 2 / mean
+    w = area / area.sum()
+    assert got["rms"] == pytest.approx(np.sqrt(np.sum(w * rel ** 2)), rel=1e-12)
+    assert got["seeds"] == 2 and got["faces"] == 3
+
+
+def test_reference_noise_falls_as_one_over_root_n():
+    # Seeds drawn with a known per-face noise sigma: the estimate of the mean's noise is
+    # sigma / sqrt(N) (to the sampling error of the variance over 20000 faces, ~1 %).
+    rng = np.random.default_rng(7)
+    sigma = 0.05
+    for n in (2, 8):
+        seeds = 1.0 + sigma * rng.standard_normal((n, 20000, 1)) * np.ones((1, 1, 3))
+        got = metrics.reference_noise(seeds, np.ones(20000))
+        assert got["rms"] == pytest.approx(sigma / np.sqrt(n), rel=0.03)
+    with pytest.raises(ValueError, match="N >= 2"):
+        metrics.reference_noise(np.ones((1, 4, 3)), np.ones(4))

@@ -1,0 +1,470 @@
+"""Contact cuts: patches split along the lines where other surfaces touch or pierce them.
+
+A box standing on a floor meets the floor along its outline, and the floor under it is in the
+dark. A floor patch that straddles the outline carries one radiance for both of its parts, so the
+bake errs twice at every contact:
+
+* light leaks into the solid: the patch's part under the box carries the lit part's radiance, the
+  box's inner (back) sides see it, and the floor vertices inside the box's footprint, which a path
+  tracer reads as black, gather that light back;
+* the box's foot and the floor beside it come out too dark, because they see the straddling patch
+  at its mean instead of its lit part.
+
+Users avoid this by cutting the floor along the outline themselves. This module does it for them
+before the solve: the lines where one surface meets another's plane (a contact edge, or the
+section of a face that pierces the plane) cut every patch they cross, exactly along the line, in
+the manner of discontinuity meshing (Heckbert 1992; Lischinski, Tampieri & Greenberg 1992), but
+only for the contacts, where the radiance jumps from lit to black. Shadow boundaries cast from a
+distance are soft and are left to refinement and receiver elements.
+
+A cut splits a convex quad or triangle into two convex polygons of up to five corners; a pentagon
+becomes a quad and a triangle, so every patch keeps the 4-corner layout of :class:`Patches`. A
+patch crossed by several lines is cut by each in turn (at most :data:`MAX_CUTS`).
+"""
+
+import numpy as np
+
+from .geometry import plane_basis, ragged
+from .patches import Patches, _assemble, _material_table
+
+#: A vertex within this fraction of the scene's bounding diagonal from a plane lies in it (1 mm
+#: in a 10 m scene): an object placed on a floor by eye or by snapping touches it.
+CONTACT_TOL = 1e-4
+
+#: Faces whose unit normals have |cos| above this are parallel: a coplanar neighbour (the next
+#: floor tile) or a parallel face (a table top above the floor) is not a contact.
+PARALLEL_COS = 1.0 - 1e-6
+
+#: A patch is cut only if corners of it lie on both sides of the line farther than this fraction
+#: of its size (sqrt of area): a line that grazes a corner would leave a sliver that changes
+#: nothing but costs a hemicube.
+MIN_PIECE = 0.02
+
+#: Most cuts applied to one original patch (a patch under a chair leg meets 4 lines).
+MAX_CUTS = 8
+
+
+
+def _unit(v):
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(n > 0, n, 1.0)
+
+
+def contact_segments(scene, plane_n, plane_d, tol, face_mask=None):
+    """Segments along which the scene's faces meet one plane.
+
+    A face that is not parallel to the plane meets it along a segment when two of its corners lie
+    in the plane (within ``tol``), or when it has corners on both sides (it pierces the plane:
+    the segment joins the crossing points). A concave face gives the hull of its crossings.
+
+    Parameters
+    ----------
+    scene : core.scene.Scene
+    plane_n : (3,) float
+        Unit normal.
+    plane_d : float
+        Offset: the plane is ``x . plane_n = plane_d``.
+    tol : float
+        Distance (m) within which a vertex lies in the plane.
+    face_mask : (F,) bool, optional
+        Faces to consider (default: all valid faces).
+
+    Returns
+    -------
+    a, b : (S, 3) float64
+        Segment ends, in the plane.
+    face : (S,) int64
+        Face of every segment.
+    """
+    valid = scene.face_valid if face_mask is None else face_mask & scene.face_valid
+    cos = scene.face_normals @ plane_n
+    faces = np.flatnonzero(valid & (np.abs(cos) <= PARALLEL_COS))
+    empty = (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, dtype=np.int64))
+    if faces.size == 0:
+        return empty
+    sizes = scene.face_sizes[faces]
+    owner, local, starts = ragged(sizes)
+    first = scene.face_starts[faces]
+    corner = first[owner] + local
+    corner_next = first[owner] + (local + 1) % sizes[owner]
+    p = scene.vertices[scene.corner_verts[corner]]
+    q = scene.vertices[scene.corner_verts[corner_next]]
+    hp = p @ plane_n - plane_d
+    hq = q @ plane_n - plane_d
+    sp = np.where(np.abs(hp) <= tol, 0.0, np.sign(hp))
+    sq = np.where(np.abs(hq) <= tol, 0.0, np.sign(hq))
+    # Per face: corners on each side and in the plane.
+    n_on = np.add.reduceat((sp == 0).astype(np.int64), starts)
+    any_pos = np.maximum.reduceat(sp, starts) > 0
+    any_neg = np.minimum.reduceat(sp, starts) < 0
+    meets = (any_pos & any_neg) | (n_on >= 2)
+    # Points where the face meets the plane: corners in it, and strict sign changes along edges.
+    cross = sp * sq < 0
+    t = np.where(cross, hp / np.where(cross, hp - hq, 1.0), 0.0)
+    x = p + (q - p) * t[:, None]
+    point_ok = (sp == 0) | cross
+    point = np.where((sp == 0)[:, None], p, x)
+    direction = _unit(np.cross(plane_n, scene.face_normals[faces]))[owner]
+    s = np.einsum("ij,ij->i", point, direction)
+    s_lo = np.where(point_ok, s, np.inf)
+    s_hi = np.where(point_ok, s, -np.inf)
+    lo = np.minimum.reduceat(s_lo, starts)
+    hi = np.maximum.reduceat(s_hi, starts)
+    keep = meets & (hi - lo > tol)
+    # The corner slots that attain the extremes (first one; ties give the same point).
+    at_lo = np.flatnonzero(point_ok & (s_lo == lo[owner]))
+    at_hi = np.flatnonzero(point_ok & (s_hi == hi[owner]))
+    a = np.zeros((faces.size, 3))
+    b = np.zeros((faces.size, 3))
+    a[owner[at_lo[::-1]]] = point[at_lo[::-1]]
+    b[owner[at_hi[::-1]]] = point[at_hi[::-1]]
+    a, b, faces = a[keep], b[keep], faces[keep]
+    # Into the plane exactly (crossing points and corners are within tol of it).
+    a = a - (a @ plane_n - plane_d)[:, None] * plane_n
+    b = b - (b @ plane_n - plane_d)[:, None] * plane_n
+    return a, b, faces
+
+
+def _lines_of(a, b, plane_n):
+    """Unit direction u along each segment and unit in-plane normal w = n x u; lengths."""
+    d = b - a
+    length = np.linalg.norm(d, axis=1)
+    u = d / length[:, None]
+    w = _unit(np.cross(plane_n, u))
+    return u, w, length
+
+
+def _crossed(corners, k, size, a, u, w, length, tol):
+    """(n,) bool: the segment (a, u, length) crosses the patch (corners, k corners) strictly."""
+    rel = corners - a[:, None, :]
+    h = np.einsum("ikj,ij->ik", rel, w)
+    t = np.einsum("ikj,ij->ik", rel, u)
+    slot_ok = np.arange(4)[None, :] < k[:, None]
+    margin = MIN_PIECE * size
+    h_max = np.where(slot_ok, h, -np.inf).max(axis=1)
+    h_min = np.where(slot_ok, h, np.inf).min(axis=1)
+    t_max = np.where(slot_ok, t, -np.inf).max(axis=1)
+    t_min = np.where(slot_ok, t, np.inf).min(axis=1)
+    return (h_max > margin) & (h_min < -margin) & (t_max > tol) & (t_min < length - tol)
+
+
+def _box_pairs(lo_a, hi_a, lo_b, hi_b, cell):
+    """Pairs (i, j) of 2-D boxes a_i, b_j that overlap, found through a uniform grid of ``cell``.
+
+    Each box is entered in the cells it covers; pairs sharing a cell are candidates, kept once,
+    and checked for overlap. Cost ~ the number of (box, cell) entries, not len(a) x len(b).
+    """
+    origin = np.minimum(lo_a.min(axis=0), lo_b.min(axis=0))
+
+    def cells(lo, hi):
+        c0 = np.floor((lo - origin) / cell).astype(np.int64)
+        c1 = np.floor((hi - origin) / cell).astype(np.int64)
+        nx, ny = c1[:, 0] - c0[:, 0] + 1, c1[:, 1] - c0[:, 1] + 1
+        owner, local, _ = ragged(nx * ny)
+        cx = c0[owner, 0] + local // ny[owner]
+        cy = c0[owner, 1] + local % ny[owner]
+        return owner, cx * (1 << 31) + cy
+
+    oa, ka = cells(lo_a, hi_a)
+    ob, kb = cells(lo_b, hi_b)
+    order = np.argsort(ka, kind="stable")
+    ka, oa = ka[order], oa[order]
+    first = np.searchsorted(ka, kb, side="left")
+    count = np.searchsorted(ka, kb, side="right") - first
+    jb, local, _ = ragged(count)
+    ia = oa[first[jb] + local]
+    jb = ob[jb]
+    key = np.unique(ia * np.int64(lo_b.shape[0]) + jb)
+    ia, jb = key // lo_b.shape[0], key % lo_b.shape[0]
+    ok = np.all((lo_a[ia] <= hi_b[jb]) & (hi_a[ia] >= lo_b[jb]), axis=1)
+    return ia[ok], jb[ok]
+
+
+class Contacts:
+    """The contact lines of a scene, as they cross its patches and pass through its vertices.
+
+    Attributes
+    ----------
+    patch : (K,) int64
+        Patch crossed by a contact line (one entry per patch-line pair, sorted by patch).
+    a, u, w : (K, 3) float64
+        A point of the line (its segment's start), its unit direction, and the unit normal to it
+        in the patch's plane.
+    length : (K,) float64
+        Length of the segment.
+    vertices : (V,) bool
+        Scene vertices on a contact line with faces of that plane on both sides of it: a floor
+        vertex on a box's outline, where the floor runs on under the box. The corners there see
+        different light on the two sides of the line (a path tracer reads black inside), so the
+        final gather treats each corner on its own (:mod:`core.gather`).
+    """
+
+    def __init__(self, patch, a, u, w, length, vertices):
+        self.patch, self.a, self.u, self.w, self.length = patch, a, u, w, length
+        self.vertices = vertices
+
+
+def find_contacts(scene, patches, *, tol=None):
+    """The contact lines that cross ``patches`` and the scene vertices on them.
+
+    Parameters
+    ----------
+    scene : core.scene.Scene
+    patches : Patches
+    tol : float, optional
+        Contact distance in metres (default ``CONTACT_TOL`` x the scene's bounding diagonal).
+
+    Returns
+    -------
+    Contacts
+    """
+    if tol is None:
+        tol = CONTACT_TOL * scene.bounding_diagonal()
+    V = scene.vertices.shape[0]
+    on_line = np.zeros(V, dtype=bool)
+    face = patches.face
+    n_f = scene.face_normals[face]
+    d_f = np.einsum("ij,ij->i", scene.vertices[scene.corner_verts[scene.face_starts[face]]], n_f)
+    k = np.where(patches.is_triangle, 3, 4)
+    # Patches lying in their face's plane (a warped face's patches are not cut).
+    dev = np.abs(np.einsum("ikj,ij->ik", patches.corners, n_f) - d_f[:, None]).max(axis=1)
+    planar = (dev <= tol) & scene.face_valid[face]
+    size = np.sqrt(patches.areas)
+    idx = np.flatnonzero(planar)
+    if idx.size == 0:
+        return Contacts(*_no_pairs(), on_line)
+    # Group patches by plane: normals to 1e-6, offsets to the contact distance.
+    key = np.column_stack([np.round(n_f[idx] * 1e6), np.round(d_f[idx] / tol)]).astype(np.int64)
+    _, group = np.unique(key, axis=0, return_inverse=True)
+    group = group.reshape(-1)
+    order = np.argsort(group, kind="stable")
+    bounds = np.flatnonzero(np.diff(np.r_[-1, group[order], -2]))
+    # Face bounding boxes, for a cheap "near the plane group" test.
+    corners, cf = scene.face_corner_indices()
+    pos = scene.vertices[scene.corner_verts[corners]]
+    fmin = np.full((scene.n_faces, 3), np.inf)
+    fmax = np.full((scene.n_faces, 3), -np.inf)
+    np.minimum.at(fmin, cf, pos)
+    np.maximum.at(fmax, cf, pos)
+    out = []
+    for g0, g1 in zip(bounds[:-1], bounds[1:]):
+        members = idx[order[g0:g1]]
+        rep = members[0]
+        n, d = n_f[rep], d_f[rep]
+        pc = patches.corners[members]
+        lo3, hi3 = pc.reshape(-1, 3).min(axis=0) - tol, pc.reshape(-1, 3).max(axis=0) + tol
+        near = np.all((fmin <= hi3) & (fmax >= lo3), axis=1)
+        a, b, _ = contact_segments(scene, n, d, tol, near)
+        if a.shape[0] == 0:
+            continue
+        u, w, length = _lines_of(a, b, n)
+        e1, e2 = plane_basis(n)
+        basis = np.stack([e1, e2], axis=1)
+        p2 = pc @ basis
+        s2 = np.stack([a, b], axis=1) @ basis
+        cell = max(float(np.median(size[members])), tol)
+        pi, si = _box_pairs(p2.min(axis=1), p2.max(axis=1), s2.min(axis=1) - tol,
+                            s2.max(axis=1) + tol, cell)
+        if pi.size:
+            pi = members[pi]
+            hit = _crossed(patches.corners[pi], k[pi], size[pi], a[si], u[si], w[si],
+                           length[si], tol)
+            if hit.any():
+                out.append((pi[hit], a[si[hit]], u[si[hit]], w[si[hit]], length[si[hit]]))
+        # Vertices of this plane's faces that lie on a segment with faces of the plane on both
+        # sides of it there (a floor vertex on a box's outline, not one where a wall meets the
+        # floor's edge).
+        fc = np.unique(face[members])
+        fo, fl, _ = ragged(scene.face_sizes[fc])
+        fcorner = scene.face_starts[fc][fo] + fl
+        fvert = scene.corner_verts[fcorner]
+        centroid = np.zeros((fc.size, 3))
+        np.add.at(centroid, fo, scene.vertices[fvert])
+        centroid /= scene.face_sizes[fc][:, None]
+        verts = np.unique(fvert)
+        v2 = scene.vertices[verts] @ basis
+        vi, si = _box_pairs(v2, v2, s2.min(axis=1) - tol, s2.max(axis=1) + tol, cell)
+        if vi.size:
+            x = scene.vertices[verts[vi]]
+            rel = x - a[si]
+            h = np.einsum("ij,ij->i", rel, w[si])
+            t = np.einsum("ij,ij->i", rel, u[si])
+            on = ((np.abs(h) <= tol) & (t >= -tol) & (t <= length[si] + tol)
+                  & (np.abs(x @ n - d) <= tol))
+            vi, si = vi[on], si[on]
+            # The plane's faces at each such vertex: which side of the line is each centroid on?
+            by_v = np.argsort(fvert, kind="stable")
+            start = np.searchsorted(fvert[by_v], verts[vi], side="left")
+            count = np.searchsorted(fvert[by_v], verts[vi], side="right") - start
+            pair, local, _ = ragged(count)
+            f_at = fo[by_v[start[pair] + local]]
+            side = np.einsum("ij,ij->i", centroid[f_at] - a[si[pair]], w[si[pair]])
+            pos = np.zeros(vi.size, dtype=bool)
+            neg = np.zeros(vi.size, dtype=bool)
+            np.logical_or.at(pos, pair, side > tol)
+            np.logical_or.at(neg, pair, side < -tol)
+            on_line[verts[vi[pos & neg]]] = True
+    if not out:
+        return Contacts(*_no_pairs(), on_line)
+    cols = [np.concatenate(c) for c in zip(*out)]
+    o = np.argsort(cols[0], kind="stable")
+    return Contacts(*(c[o] for c in cols), on_line)
+
+
+def _no_pairs():
+    z3 = np.zeros((0, 3))
+    return np.zeros(0, dtype=np.int64), z3, z3, z3, np.zeros(0)
+
+
+def _canonical_first(p, q):
+    """(n,) bool: p precedes q lexicographically (x, then y, then z)."""
+    return ((p[:, 0] < q[:, 0]) | ((p[:, 0] == q[:, 0]) & ((p[:, 1] < q[:, 1])
+            | ((p[:, 1] == q[:, 1]) & (p[:, 2] < q[:, 2])))))
+
+
+def _cut(corners, k, a, w):
+    """Cut patches by lines; returns the pieces' corners (m, 4, 3), their count per patch.
+
+    Every patch gives two convex polygons (one per side), each with 3 to 5 corners; a pentagon
+    becomes a quad and a triangle. Crossing points are computed from the edge's endpoints in a
+    canonical order, so the two patches sharing an edge place bit-identical points on it.
+    """
+    n = corners.shape[0]
+    h = np.einsum("ikj,ij->ik", corners - a[:, None, :], w)
+    slot = np.arange(4)[None, :]
+    nxt = (slot + 1) % k[:, None]
+    v = corners
+    vn = np.take_along_axis(corners, nxt[:, :, None], axis=1)
+    hn = np.take_along_axis(h, nxt, axis=1)
+    valid = slot < k[:, None]
+    cross = valid & (h * hn < 0)
+    # Crossing point from the canonical endpoint.
+    first = _canonical_first(v.reshape(-1, 3), vn.reshape(-1, 3)).reshape(n, 4)
+    p0 = np.where(first[:, :, None], v, vn)
+    p1 = np.where(first[:, :, None], vn, v)
+    h0 = np.where(first, h, hn)
+    h1 = np.where(first, hn, h)
+    t = np.where(cross, h0 / np.where(cross, h0 - h1, 1.0), 0.0)
+    x = p0 + (p1 - p0) * t[:, :, None]
+    # Sequence of up to 8 candidate corners per side: (vertex i, crossing on edge i), i = 0..3.
+    seq = np.stack([v, x], axis=2).reshape(n, 8, 3)
+    pieces, keep = [], []
+    for sign in (1.0, -1.0):
+        ok = np.stack([valid & (sign * h >= 0), cross], axis=2).reshape(n, 8)
+        m = ok.sum(axis=1)
+        order = np.argsort(~ok, axis=1, kind="stable")[:, :5]
+        poly = np.take_along_axis(seq, order[:, :, None], axis=1)
+        # 3 corners -> (0, 1, 2, 2); 4 -> (0, 1, 2, 3); 5 -> (0, 1, 2, 3) and (0, 3, 4, 4).
+        main = np.where((m >= 4)[:, None], np.arange(4), np.array([0, 1, 2, 2]))
+        pieces += [np.take_along_axis(poly, main[:, :, None], axis=1), poly[:, [0, 3, 4, 4]]]
+        keep += [np.ones(n, dtype=bool), m == 5]
+    pieces = np.stack(pieces, axis=1)          # (n, 4, 4, 3): +main, +extra, -main, -extra
+    keep = np.stack(keep, axis=1)              # (n, 4)
+    return pieces[keep], keep.sum(axis=1)
+
+
+def split_at_contacts(scene, patches, contacts=None, *, tol=None):
+    """Cut the patches along the scene's contact lines.
+
+    Parameters
+    ----------
+    scene : core.scene.Scene
+    patches : Patches
+        As made by :func:`core.patches.make_patches` (needs ``incidence_slot``).
+    contacts : Contacts, optional
+        From :func:`find_contacts` for these patches (found here if not given).
+    tol : float, optional
+        Contact distance in metres (default ``CONTACT_TOL`` x the scene's bounding diagonal).
+
+    Returns
+    -------
+    new : Patches
+        The pieces replace their patch in place, in order (still contiguous per face).
+    parent : (P',) int64
+        Index in ``patches`` of the patch each new patch comes from.
+    info : dict
+        ``lines`` (patch-line pairs found), ``cut`` (patches cut at least once), ``cuts``
+        (cuts made), ``added`` (P' - P).
+    """
+    if not isinstance(patches, Patches):
+        raise TypeError(f"patches must be a Patches; got {type(patches).__name__}")
+    if patches.incidence_slot is None:
+        raise ValueError("patches.incidence_slot is None: split_at_contacts needs Patches made by "
+                         "make_patches")
+    if tol is None:
+        tol = CONTACT_TOL * scene.bounding_diagonal()
+    if contacts is None:
+        contacts = find_contacts(scene, patches, tol=tol)
+    pair_p, a, u, w, length = (contacts.patch, contacts.a, contacts.u, contacts.w,
+                               contacts.length)
+    P0 = patches.n_patches
+    info = dict(lines=int(pair_p.size), cut=int(np.unique(pair_p).size), cuts=0, added=0,
+                vertices=int(np.count_nonzero(contacts.vertices)))
+    parent = np.arange(P0, dtype=np.int64)
+    if pair_p.size == 0:
+        return patches, parent, info
+    corners = np.asarray(patches.corners)
+    face = np.asarray(patches.face)
+    inc_v, inc_p = patches.incidence_vertex, patches.incidence_patch
+    inc_c, inc_s = patches.incidence_corner, patches.incidence_slot
+    for _ in range(MAX_CUTS):
+        if pair_p.size == 0:
+            break
+        P = corners.shape[0]
+        # Each patch takes its first pending line this round; the rest wait.
+        uniq, first = np.unique(pair_p, return_index=True)
+        now = np.zeros(pair_p.size, dtype=bool)
+        now[first] = True
+        is_tri = np.all(corners[:, 3] == corners[:, 2], axis=1)
+        k = np.where(is_tri, 3, 4)
+        pieces, n_pieces = _cut(corners[uniq], k[uniq], a[now], w[now])
+        info["cuts"] += int(uniq.size)
+        n_child = np.ones(P, dtype=np.int64)
+        n_child[uniq] = n_pieces
+        par, local, start = ragged(n_child)
+        new_corners = corners[par]
+        cut = np.zeros(P, dtype=bool)
+        cut[uniq] = True
+        piece_start = np.zeros(P, dtype=np.int64)
+        piece_start[uniq] = np.cumsum(n_pieces) - n_pieces
+        sel = cut[par]
+        new_corners[sel] = pieces[piece_start[par[sel]] + local[sel]]
+        # Incidence: an original vertex stays a corner of every piece that has it (bit-equal).
+        stay = ~cut[inc_p]
+        e = np.flatnonzero(~stay)
+        pos = corners[inc_p[e], inc_s[e]]
+        eo, el, _ = ragged(n_child[inc_p[e]])
+        child = start[inc_p[e]][eo] + el
+        k_new = np.where(np.all(new_corners[:, 3] == new_corners[:, 2], axis=1), 3, 4)
+        match = np.all(new_corners[child] == pos[eo][:, None, :], axis=2)
+        match &= np.arange(4)[None, :] < k_new[child][:, None]
+        has = match.any(axis=1)
+        slot = np.argmax(match, axis=1)
+        keep_e = e[eo[has]]
+        inc_v = np.concatenate([inc_v[stay], inc_v[keep_e]])
+        inc_c = np.concatenate([inc_c[stay], inc_c[keep_e]])
+        inc_p, inc_s = (np.concatenate([start[inc_p[stay]], child[has]]),
+                        np.concatenate([inc_s[stay], slot[has]]))
+        # Pending lines: to every child of their patch that they still cross.
+        rest = np.flatnonzero(~now)
+        ro, rl, _ = ragged(n_child[pair_p[rest]])
+        r = rest[ro]
+        rc = start[pair_p[r]] + rl
+        k_c = np.where(np.all(new_corners[rc, 3] == new_corners[rc, 2], axis=1), 3, 4)
+        size_c = _sizes(new_corners[rc])
+        hit = _crossed(new_corners[rc], k_c, size_c, a[r], u[r], w[r], length[r], tol)
+        pair_p, a, u, w, length = rc[hit], a[r[hit]], u[r[hit]], w[r[hit]], length[r[hit]]
+        parent = parent[par]
+        face = face[par]
+        corners = new_corners
+    info["added"] = int(corners.shape[0] - P0)
+    n_faces = patches.face_patch_start.shape[0] - 1
+    new = _assemble(corners, face, _material_table(patches), n_faces, inc_v, inc_p, inc_c, inc_s)
+    return new, parent, info
+
+
+def _sizes(corners):
+    """sqrt of the area of quads / triangles (P, 4, 3)."""
+    d1 = corners[:, 2] - corners[:, 0]
+    d2 = corners[:, 3] - corners[:, 1]
+    return np.sqrt(0.5 * np.linalg.norm(np.cross(d1, d2), axis=1))

@@ -1,0 +1,224 @@
+"""Contact cuts (core/contacts.py): patches cut along the outlines of objects standing on them.
+
+Oracles: the footprint's own geometry (areas, which side of the outline every piece lies on) and
+the physics of a closed box on a floor: no light reaches the floor inside its footprint, so a
+path tracer reads exactly 0 there (tests/compare shows Cycles does).
+"""
+
+import numpy as np
+import pytest
+
+from core import BakeSettings, bake
+from core.bake import make_reciprocal
+from core.contacts import CONTACT_TOL, find_contacts, split_at_contacts
+from core.errors import SettingsError
+from core.patches import make_patches
+from core.samples import _Builder
+
+FLOOR, BOX, WALL, LAMP = 0, 1, 2, 3
+
+
+def _footprint(centre, half, angle):
+    """Corners (4, 2) of a rectangle, counter-clockwise."""
+    c, s = np.cos(angle), np.sin(angle)
+    local = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * half
+    return centre + local @ np.array([[c, s], [-s, c]])
+
+
+def _room(footprint, height=0.5, floor_cells=4, size=2.0, lamp=True, walls=True):
+    """A closed 2 x 2 x 2 m room, floor as ``floor_cells``^2 quads, a box without a bottom
+    standing on it (outward faces), and a ceiling lamp. Materials: floor, box, walls, lamp."""
+    b = _Builder()
+    b.grid((0, 0, 0), (size, 0, 0), (0, size, 0), floor_cells, floor_cells, FLOOR, b.object("Floor"))
+    box = b.object("Box")
+    fp = np.asarray(footprint, dtype=np.float64)
+    for k in range(4):
+        p, q = fp[k], fp[(k + 1) % 4]
+        b.polygon([[p[0], p[1], 0.0], [q[0], q[1], 0.0], [q[0], q[1], height],
+                   [p[0], p[1], height]], BOX, box)
+    b.polygon([[x, y, height] for x, y in fp], BOX, box)
+    if walls:
+        wall = b.object("Walls")
+        h = size
+        b.grid((0, 0, h), (0, size, 0), (size, 0, 0), 2, 2, WALL, wall)          # ceiling, down
+        b.grid((0, 0, 0), (0, 0, h), (size, 0, 0), 2, 2, WALL, wall)             # y = 0
+        b.grid((size, size, 0), (0, 0, h), (-size, 0, 0), 2, 2, WALL, wall)      # y = size
+        b.grid((0, size, 0), (0, 0, h), (0, -size, 0), 2, 2, WALL, wall)         # x = 0
+        b.grid((size, 0, 0), (0, 0, h), (0, size, 0), 2, 2, WALL, wall)          # x = size
+    if lamp:
+        c = size / 2
+        b.polygon([[c - 0.3, c - 0.3, size - 0.01], [c - 0.3, c + 0.3, size - 0.01],
+                   [c + 0.3, c + 0.3, size - 0.01], [c + 0.3, c - 0.3, size - 0.01]], LAMP,
+                  b.object("Lamp"))
+    rho = [[0.5, 0.5, 0.5], [0.6, 0.4, 0.3], [0.7, 0.7, 0.7], [0.0, 0.0, 0.0]]
+    le = [[0, 0, 0], [0, 0, 0], [0, 0, 0], [10.0, 10.0, 10.0]]
+    return b.scene(rho, le, material_names=["floor", "box", "wall", "lamp"])
+
+
+def _inside(points, fp, slack):
+    """Signed depth inside the convex footprint (min over its edges; > 0 inside)."""
+    depth = np.full(points.shape[0], np.inf)
+    for k in range(4):
+        p, q = fp[k], fp[(k + 1) % 4]
+        t = (q - p) / np.linalg.norm(q - p)
+        inward = np.array([-t[1], t[0]])
+        depth = np.minimum(depth, (points - p) @ inward)
+    return depth
+
+
+# A box rotated by 25 degrees whose outline crosses 0.5 m floor quads in every direction.
+ROTATED = _footprint(np.array([0.93, 1.07]), np.array([0.31, 0.22]), np.radians(25.0))
+
+
+def test_pieces_lie_on_one_side_of_the_outline_and_keep_the_area():
+    scene = _room(ROTATED, walls=False)
+    patches = make_patches(scene, 0.5)
+    new, parent, info = split_at_contacts(scene, patches)
+    assert info["cut"] > 0 and new.n_patches == patches.n_patches + info["added"]
+    # Every face keeps its area (the pieces tile their patch), and parents are patches of it.
+    a0 = np.bincount(patches.face, patches.areas, minlength=scene.n_faces)
+    a1 = np.bincount(new.face, new.areas, minlength=scene.n_faces)
+    np.testing.assert_allclose(a1, a0, rtol=1e-12, atol=1e-15)
+    assert np.array_equal(new.face, patches.face[parent])
+    # No floor piece straddles the outline: all its corners inside-or-on, or outside-or-on.
+    tol = 1e-9
+    floor = np.flatnonzero(new.material == FLOOR)
+    depth = _inside(new.corners[floor][:, :, :2].reshape(-1, 2), ROTATED, tol).reshape(-1, 4)
+    straddle = (depth.max(axis=1) > tol) & (depth.min(axis=1) < -tol)
+    assert not straddle.any()
+    # Before the cuts many did (the test would pass trivially otherwise).
+    old = np.flatnonzero(patches.material == FLOOR)
+    d0 = _inside(patches.corners[old][:, :, :2].reshape(-1, 2), ROTATED, tol).reshape(-1, 4)
+    assert ((d0.max(axis=1) > tol) & (d0.min(axis=1) < -tol)).sum() >= 4
+    # The covered pieces tile the footprint exactly: their area is the rectangle's.
+    covered = floor[depth.min(axis=1) >= -tol]
+    np.testing.assert_allclose(new.areas[covered].sum(), 4 * 0.31 * 0.22, rtol=1e-12)
+    # Pieces are convex, counter-clockwise about their face's normal, and not slivers.
+    np.testing.assert_allclose(new.normals, scene.face_normals[new.face], atol=1e-12)
+    assert new.areas.min() > 0
+    # Every original vertex is still a corner of a patch, at the same place.
+    assert set(new.incidence_vertex.tolist()) == set(patches.incidence_vertex.tolist())
+    np.testing.assert_array_equal(new.corners[new.incidence_patch, new.incidence_slot],
+                                  scene.vertices[new.incidence_vertex])
+
+
+def test_neighbours_cut_by_one_line_share_its_points():
+    # Two floor quads crossed by one line place bit-identical points on their shared edge.
+    scene = _room(ROTATED, walls=False)
+    new, _, _ = split_at_contacts(scene, make_patches(scene, 0.5))
+    floor = new.corners[new.material == FLOOR].reshape(-1, 3)
+    pts = np.unique(floor, axis=0)
+    # Points on the outline: each appears in at least two pieces (no T-junction at the cut).
+    on = np.abs(_inside(pts[:, :2], ROTATED, 0)) < 1e-12
+    for p in pts[on]:
+        if np.all((p[:2] > 1e-9) & (p[:2] < 2 - 1e-9)):
+            assert np.count_nonzero(np.all(floor == p, axis=1)) >= 2
+
+
+def test_no_light_under_a_box():
+    # Floor vertices strictly inside the footprint: a closed box without a bottom lets no light
+    # in, so they read exactly 0. Without the cuts the floor quads that straddle the outline
+    # carry their lit part's light under the box, and it leaks into those vertices.
+    scene = _room(ROTATED, floor_cells=8)
+    inside = _inside(scene.vertices[:, :2], ROTATED, 0) > 1e-3
+    inside &= np.abs(scene.vertices[:, 2]) < 1e-12
+    corners = np.flatnonzero(inside[scene.corner_verts])
+    assert corners.size >= 2
+    fast = dict(patch_size=0.5, resolution=32, element_levels=0)
+    cut = bake(scene, BakeSettings(**fast))
+    leak = bake(scene, BakeSettings(contact_cuts=False, **fast))
+    floor_c = np.flatnonzero((scene.face_materials[np.repeat(np.arange(scene.n_faces),
+                                                             scene.face_sizes)] == FLOOR))
+    mean_floor = cut.corner_colours[floor_c].mean()
+    assert mean_floor > 0
+    assert np.all(cut.corner_colours[corners] == 0.0)
+    assert leak.corner_colours[corners].max() > 0.005 * mean_floor   # 1.3 % measured
+    assert cut.report["contacts"]["cut"] > 0 and "contacts" not in leak.report
+    # Energy still balances (the cut pieces are ordinary patches).
+    e = cut.report["energy"]
+    assert abs(e["balance"]) < 0.02 * e["emitted"]
+
+
+def test_a_corner_on_the_outline_takes_the_light_of_its_own_side():
+    # An axis-aligned box whose outline runs along floor edges: the floor vertex at (1, 1) is on
+    # the outline, with floor faces both under the box and beside it. The corner of a covered
+    # face reads 0 (a path tracer's value just inside that face); the corner of an open face
+    # reads the light beside the box, not a blend of the two.
+    fp = np.array([[0.5, 1.0], [1.0, 1.0], [1.0, 1.5], [0.5, 1.5]])
+    scene = _room(fp, floor_cells=4)
+    res = bake(scene, BakeSettings(patch_size=0.5, resolution=32, element_levels=0))
+    v = np.flatnonzero(np.all(np.abs(scene.vertices - [1.0, 1.0, 0.0]) < 1e-12, axis=1)
+                       & (np.arange(scene.vertices.shape[0]) < 25))
+    assert v.size == 1
+    face_of = np.repeat(np.arange(scene.n_faces), scene.face_sizes)
+    at = np.flatnonzero((scene.corner_verts == v[0]) & (scene.face_materials[face_of] == FLOOR))
+    centroid = np.array([scene.vertices[scene.corner_verts[scene.face_starts[f]:
+                                                           scene.face_starts[f] + 4]].mean(0)
+                         for f in face_of[at]])
+    covered = _inside(centroid[:, :2], fp, 0) > 0
+    assert covered.sum() == 1 and (~covered).sum() == 3
+    lum = res.corner_colours[at].sum(axis=1)
+    assert lum[covered][0] == 0.0
+    assert np.all(lum[~covered] > 0.01)
+    assert res.report["contacts"]["vertices"] >= 1
+    # Without the cuts all four corners share one gather: the covered one is lit.
+    off = bake(scene, BakeSettings(patch_size=0.5, resolution=32, element_levels=0,
+                                   contact_cuts=False))
+    assert off.corner_colours[at][covered].sum() > 0.01
+
+
+def test_contact_tolerance_and_parallel_faces():
+    # A box floating 1 cm above the floor touches nothing (no cut); one within the contact
+    # distance (CONTACT_TOL of the bounding diagonal) does.
+    for lift, expect in ((0.01, False), (0.2 * CONTACT_TOL, True)):
+        scene = _room(ROTATED, walls=False)
+        verts = scene.vertices.copy()
+        box = scene.face_objects[np.repeat(np.arange(scene.n_faces), scene.face_sizes)] == 1
+        vb = np.unique(scene.corner_verts[box])
+        verts[vb, 2] += lift
+        from core.scene import make_scene
+        moved = make_scene(verts, scene.corner_verts, scene.face_starts, scene.face_sizes,
+                           scene.face_materials, scene.reflectance, scene.emission,
+                           face_objects=scene.face_objects, object_names=scene.object_names)
+        found = find_contacts(moved, make_patches(moved, 0.5))
+        assert (found.patch.size > 0) == expect
+
+
+def test_a_box_sunk_into_the_floor_cuts_along_its_section():
+    # Piercing faces (a box pushed 5 cm into the floor) cut along the section, like contacts.
+    scene = _room(ROTATED, walls=False)
+    verts = scene.vertices.copy()
+    face_of = np.repeat(np.arange(scene.n_faces), scene.face_sizes)
+    vb = np.unique(scene.corner_verts[scene.face_objects[face_of] == 1])
+    verts[vb, 2] -= 0.05
+    from core.scene import make_scene
+    sunk = make_scene(verts, scene.corner_verts, scene.face_starts, scene.face_sizes,
+                      scene.face_materials, scene.reflectance, scene.emission,
+                      face_objects=scene.face_objects, object_names=scene.object_names)
+    new, _, info = split_at_contacts(sunk, make_patches(sunk, 0.5))
+    floor = np.flatnonzero(new.material == FLOOR)
+    depth = _inside(new.corners[floor][:, :, :2].reshape(-1, 2), ROTATED, 0).reshape(-1, 4)
+    assert info["cut"] > 0
+    assert not ((depth.max(axis=1) > 1e-9) & (depth.min(axis=1) < -1e-9)).any()
+
+
+def test_contact_cuts_setting_is_validated():
+    with pytest.raises(SettingsError, match="contact_cuts"):
+        BakeSettings(contact_cuts="yes")
+
+
+def test_sinkhorn_leaves_groups_it_cannot_balance():
+    # Nodes 0-2: a closed group (rows sum to 1). Nodes 3, 4: two patches shut inside a solid,
+    # seeing each other unevenly (F_34 = 0.02, F_43 = 0.008, equal areas): no symmetric
+    # scaling meets both row sums, and the plain iteration overflowed into every row (NaN).
+    F = np.zeros((5, 5), dtype=np.float32)
+    F[:3, :3] = [[0.0, 0.6, 0.4], [0.3, 0.0, 0.7], [0.2, 0.8, 0.0]]
+    F[3, 4], F[4, 3] = 0.02, 0.008
+    areas = np.array([1.0, 2.0, 1.5, 0.01, 0.01])
+    R, info = make_reciprocal(F, areas)
+    assert np.all(np.isfinite(R))
+    assert info["unscaled"] == 2
+    np.testing.assert_allclose(R.sum(axis=1), F.sum(axis=1), rtol=1e-4)
+    G = areas[:3, None] * R[:3, :3]
+    np.testing.assert_allclose(G, G.T, rtol=1e-4, atol=1e-7)
+    np.testing.assert_array_equal(R[3:], F[3:])
