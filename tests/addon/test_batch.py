@@ -127,6 +127,24 @@ def test_element_levels_reach_the_bake(package, tmp_path):
     assert len(reports["1"]["elements"]["levels"]) <= 1
 
 
+def test_contact_cuts_reach_the_bake(package, tmp_path):
+    # The Cornell box's blocks stand on the floor: the default bake cuts the floor's patches
+    # along their outlines, --no-contact-cuts does not.
+    src = tmp_path / "cornell.blend"
+    shutil.copyfile(CORNELL, src)
+    reports = {}
+    for name, extra in (("on", []), ("off", ["--no-contact-cuts"])):
+        proc = run_batch(src, "--output", tmp_path / ("%s.blend" % name), "--report",
+                         tmp_path / ("%s.json" % name), *FAST, *extra)
+        assert proc.returncode == 0, proc.stderr
+        reports[name] = json.loads((tmp_path / ("%s.json" % name)).read_text())
+    assert reports["on"]["settings"]["contact_cuts"] is True
+    assert reports["off"]["settings"]["contact_cuts"] is False
+    assert reports["on"]["contacts"]["cut"] > 0
+    assert reports["on"]["patches"] == reports["off"]["patches"] + reports["on"]["contacts"]["added"]
+    assert "contacts" not in reports["off"]
+
+
 def test_in_place_overwrites_only_when_asked(package, tmp_path):
     src = tmp_path / "scene.blend"
     save_scene(src)
