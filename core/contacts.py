@@ -24,7 +24,7 @@ patch crossed by several lines is cut by each in turn (at most :data:`MAX_CUTS`)
 
 import numpy as np
 
-from .geometry import plane_basis, ragged
+from .geometry import ragged
 from .patches import Patches, _assemble, _material_table
 
 #: A vertex within this fraction of the scene's bounding diagonal from a plane lies in it (1 mm
@@ -50,8 +50,8 @@ def _unit(v):
     return v / np.where(n > 0, n, 1.0)
 
 
-def contact_segments(scene, plane_n, plane_d, tol, face_mask=None):
-    """Segments along which the scene's faces meet one plane.
+def contact_segments(scene, faces, plane_n, plane_d, tol):
+    """Segments along which faces meet planes, one (face, plane) pair per row.
 
     A face that is not parallel to the plane meets it along a segment when two of its corners lie
     in the plane (within ``tol``), or when it has corners on both sides (it pierces the plane:
@@ -60,37 +60,43 @@ def contact_segments(scene, plane_n, plane_d, tol, face_mask=None):
     Parameters
     ----------
     scene : core.scene.Scene
-    plane_n : (3,) float
-        Unit normal.
-    plane_d : float
-        Offset: the plane is ``x . plane_n = plane_d``.
+    faces : (K,) int
+        Valid faces of the scene.
+    plane_n : (K, 3) float
+        Unit normals of the planes.
+    plane_d : (K,) float
+        Offsets: plane k is ``x . plane_n[k] = plane_d[k]``.
     tol : float
-        Distance (m) within which a vertex lies in the plane.
-    face_mask : (F,) bool, optional
-        Faces to consider (default: all valid faces).
+        Distance (m) within which a corner lies in the plane.
 
     Returns
     -------
-    a, b : (S, 3) float64
-        Segment ends, in the plane.
-    face : (S,) int64
-        Face of every segment.
+    a, b : (K, 3) float64
+        Segment ends, in the plane (meaningless where ``ok`` is False).
+    ok : (K,) bool
+        The face meets the plane along a segment longer than ``tol``.
     """
-    valid = scene.face_valid if face_mask is None else face_mask & scene.face_valid
-    cos = scene.face_normals @ plane_n
-    faces = np.flatnonzero(valid & (np.abs(cos) <= PARALLEL_COS))
-    empty = (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, dtype=np.int64))
-    if faces.size == 0:
-        return empty
-    sizes = scene.face_sizes[faces]
+    faces = np.asarray(faces, dtype=np.int64)
+    K = faces.size
+    a = np.zeros((K, 3))
+    b = np.zeros((K, 3))
+    ok = np.zeros(K, dtype=bool)
+    if K == 0:
+        return a, b, ok
+    n_g = scene.face_normals[faces]
+    cand = np.abs(np.einsum("ij,ij->i", n_g, plane_n)) <= PARALLEL_COS
+    rows = np.flatnonzero(cand)
+    if rows.size == 0:
+        return a, b, ok
+    sizes = scene.face_sizes[faces[rows]]
     owner, local, starts = ragged(sizes)
-    first = scene.face_starts[faces]
-    corner = first[owner] + local
-    corner_next = first[owner] + (local + 1) % sizes[owner]
-    p = scene.vertices[scene.corner_verts[corner]]
-    q = scene.vertices[scene.corner_verts[corner_next]]
-    hp = p @ plane_n - plane_d
-    hq = q @ plane_n - plane_d
+    first = scene.face_starts[faces[rows]]
+    p = scene.vertices[scene.corner_verts[first[owner] + local]]
+    q = scene.vertices[scene.corner_verts[first[owner] + (local + 1) % sizes[owner]]]
+    n = plane_n[rows][owner]
+    d = plane_d[rows][owner]
+    hp = np.einsum("ij,ij->i", p, n) - d
+    hq = np.einsum("ij,ij->i", q, n) - d
     sp = np.where(np.abs(hp) <= tol, 0.0, np.sign(hp))
     sq = np.where(np.abs(hq) <= tol, 0.0, np.sign(hq))
     # Per face: corners on each side and in the plane.
@@ -101,35 +107,31 @@ def contact_segments(scene, plane_n, plane_d, tol, face_mask=None):
     # Points where the face meets the plane: corners in it, and strict sign changes along edges.
     cross = sp * sq < 0
     t = np.where(cross, hp / np.where(cross, hp - hq, 1.0), 0.0)
-    x = p + (q - p) * t[:, None]
     point_ok = (sp == 0) | cross
-    point = np.where((sp == 0)[:, None], p, x)
-    direction = _unit(np.cross(plane_n, scene.face_normals[faces]))[owner]
+    point = np.where((sp == 0)[:, None], p, p + (q - p) * t[:, None])
+    direction = _unit(np.cross(plane_n[rows], n_g[rows]))[owner]
     s = np.einsum("ij,ij->i", point, direction)
     s_lo = np.where(point_ok, s, np.inf)
     s_hi = np.where(point_ok, s, -np.inf)
     lo = np.minimum.reduceat(s_lo, starts)
     hi = np.maximum.reduceat(s_hi, starts)
-    keep = meets & (hi - lo > tol)
-    # The corner slots that attain the extremes (first one; ties give the same point).
+    # The corner slots that attain the extremes (the first one; ties give the same point).
     at_lo = np.flatnonzero(point_ok & (s_lo == lo[owner]))
     at_hi = np.flatnonzero(point_ok & (s_hi == hi[owner]))
-    a = np.zeros((faces.size, 3))
-    b = np.zeros((faces.size, 3))
-    a[owner[at_lo[::-1]]] = point[at_lo[::-1]]
-    b[owner[at_hi[::-1]]] = point[at_hi[::-1]]
-    a, b, faces = a[keep], b[keep], faces[keep]
+    a[rows[owner[at_lo[::-1]]]] = point[at_lo[::-1]]
+    b[rows[owner[at_hi[::-1]]]] = point[at_hi[::-1]]
+    ok[rows] = meets & (hi - lo > tol)
     # Into the plane exactly (crossing points and corners are within tol of it).
-    a = a - (a @ plane_n - plane_d)[:, None] * plane_n
-    b = b - (b @ plane_n - plane_d)[:, None] * plane_n
-    return a, b, faces
+    a -= (np.einsum("ij,ij->i", a, plane_n) - plane_d)[:, None] * plane_n
+    b -= (np.einsum("ij,ij->i", b, plane_n) - plane_d)[:, None] * plane_n
+    return a, b, ok
 
 
 def _lines_of(a, b, plane_n):
     """Unit direction u along each segment and unit in-plane normal w = n x u; lengths."""
     d = b - a
     length = np.linalg.norm(d, axis=1)
-    u = d / length[:, None]
+    u = d / np.where(length > 0, length, 1.0)[:, None]
     w = _unit(np.cross(plane_n, u))
     return u, w, length
 
@@ -149,21 +151,29 @@ def _crossed(corners, k, size, a, u, w, length, tol):
 
 
 def _box_pairs(lo_a, hi_a, lo_b, hi_b, cell):
-    """Pairs (i, j) of 2-D boxes a_i, b_j that overlap, found through a uniform grid of ``cell``.
+    """Pairs (i, j) of boxes a_i, b_j (any dimension) that overlap, found through a uniform grid.
 
-    Each box is entered in the cells it covers; pairs sharing a cell are candidates, kept once,
-    and checked for overlap. Cost ~ the number of (box, cell) entries, not len(a) x len(b).
+    Each box is entered in the cells of side ``cell`` it covers; pairs sharing a cell are
+    candidates, kept once, and checked for overlap. Cost ~ the number of (box, cell) entries,
+    not len(a) x len(b).
     """
+    if lo_a.shape[0] == 0 or lo_b.shape[0] == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     origin = np.minimum(lo_a.min(axis=0), lo_b.min(axis=0))
+    dim = lo_a.shape[1]
 
     def cells(lo, hi):
         c0 = np.floor((lo - origin) / cell).astype(np.int64)
         c1 = np.floor((hi - origin) / cell).astype(np.int64)
-        nx, ny = c1[:, 0] - c0[:, 0] + 1, c1[:, 1] - c0[:, 1] + 1
-        owner, local, _ = ragged(nx * ny)
-        cx = c0[owner, 0] + local // ny[owner]
-        cy = c0[owner, 1] + local % ny[owner]
-        return owner, cx * (1 << 31) + cy
+        extent = c1 - c0 + 1
+        owner, local, _ = ragged(np.prod(extent, axis=1))
+        key = np.zeros(owner.size, dtype=np.int64)
+        rest = local
+        for axis in range(dim - 1, -1, -1):
+            e = extent[owner, axis]
+            key = key + (c0[owner, axis] + rest % e) * (np.int64(1) << (21 * axis))
+            rest = rest // e
+        return owner, key
 
     oa, ka = cells(lo_a, hi_a)
     ob, kb = cells(lo_b, hi_b)
@@ -204,8 +214,16 @@ class Contacts:
         self.vertices = vertices
 
 
+#: The grid of the spatial join has at most this many cells along the scene's diagonal.
+GRID_CELLS = 1024
+
+
 def find_contacts(scene, patches, *, tol=None):
     """The contact lines that cross ``patches`` and the scene vertices on them.
+
+    Candidate (patch, face) pairs come from a spatial join of bounding boxes (grid of about the
+    median patch size), so the cost grows with the number of neighbours, not with patches x faces
+    or with the number of distinct planes (a finely tessellated sphere costs like a floor).
 
     Parameters
     ----------
@@ -218,8 +236,9 @@ def find_contacts(scene, patches, *, tol=None):
     -------
     Contacts
     """
+    diag = scene.bounding_diagonal()
     if tol is None:
-        tol = CONTACT_TOL * scene.bounding_diagonal()
+        tol = CONTACT_TOL * diag
     V = scene.vertices.shape[0]
     on_line = np.zeros(V, dtype=bool)
     face = patches.face
@@ -228,87 +247,59 @@ def find_contacts(scene, patches, *, tol=None):
     k = np.where(patches.is_triangle, 3, 4)
     # Patches lying in their face's plane (a warped face's patches are not cut).
     dev = np.abs(np.einsum("ikj,ij->ik", patches.corners, n_f) - d_f[:, None]).max(axis=1)
-    planar = (dev <= tol) & scene.face_valid[face]
+    planar = np.flatnonzero((dev <= tol) & scene.face_valid[face])
     size = np.sqrt(patches.areas)
-    idx = np.flatnonzero(planar)
-    if idx.size == 0:
-        return Contacts(*_no_pairs(), on_line)
-    # Group patches by plane: normals to 1e-6, offsets to the contact distance.
-    key = np.column_stack([np.round(n_f[idx] * 1e6), np.round(d_f[idx] / tol)]).astype(np.int64)
-    _, group = np.unique(key, axis=0, return_inverse=True)
-    group = group.reshape(-1)
-    order = np.argsort(group, kind="stable")
-    bounds = np.flatnonzero(np.diff(np.r_[-1, group[order], -2]))
-    # Face bounding boxes, for a cheap "near the plane group" test.
+    # Face bounding boxes (corners are stored face after face).
     corners, cf = scene.face_corner_indices()
     pos = scene.vertices[scene.corner_verts[corners]]
-    fmin = np.full((scene.n_faces, 3), np.inf)
-    fmax = np.full((scene.n_faces, 3), -np.inf)
-    np.minimum.at(fmin, cf, pos)
-    np.maximum.at(fmax, cf, pos)
-    out = []
-    for g0, g1 in zip(bounds[:-1], bounds[1:]):
-        members = idx[order[g0:g1]]
-        rep = members[0]
-        n, d = n_f[rep], d_f[rep]
-        pc = patches.corners[members]
-        lo3, hi3 = pc.reshape(-1, 3).min(axis=0) - tol, pc.reshape(-1, 3).max(axis=0) + tol
-        near = np.all((fmin <= hi3) & (fmax >= lo3), axis=1)
-        a, b, _ = contact_segments(scene, n, d, tol, near)
-        if a.shape[0] == 0:
-            continue
-        u, w, length = _lines_of(a, b, n)
-        e1, e2 = plane_basis(n)
-        basis = np.stack([e1, e2], axis=1)
-        p2 = pc @ basis
-        s2 = np.stack([a, b], axis=1) @ basis
-        cell = max(float(np.median(size[members])), tol)
-        pi, si = _box_pairs(p2.min(axis=1), p2.max(axis=1), s2.min(axis=1) - tol,
-                            s2.max(axis=1) + tol, cell)
-        if pi.size:
-            pi = members[pi]
-            hit = _crossed(patches.corners[pi], k[pi], size[pi], a[si], u[si], w[si],
-                           length[si], tol)
-            if hit.any():
-                out.append((pi[hit], a[si[hit]], u[si[hit]], w[si[hit]], length[si[hit]]))
-        # Vertices of this plane's faces that lie on a segment with faces of the plane on both
-        # sides of it there (a floor vertex on a box's outline, not one where a wall meets the
-        # floor's edge).
-        fc = np.unique(face[members])
-        fo, fl, _ = ragged(scene.face_sizes[fc])
-        fcorner = scene.face_starts[fc][fo] + fl
-        fvert = scene.corner_verts[fcorner]
-        centroid = np.zeros((fc.size, 3))
-        np.add.at(centroid, fo, scene.vertices[fvert])
-        centroid /= scene.face_sizes[fc][:, None]
-        verts = np.unique(fvert)
-        v2 = scene.vertices[verts] @ basis
-        vi, si = _box_pairs(v2, v2, s2.min(axis=1) - tol, s2.max(axis=1) + tol, cell)
-        if vi.size:
-            x = scene.vertices[verts[vi]]
-            rel = x - a[si]
-            h = np.einsum("ij,ij->i", rel, w[si])
-            t = np.einsum("ij,ij->i", rel, u[si])
-            on = ((np.abs(h) <= tol) & (t >= -tol) & (t <= length[si] + tol)
-                  & (np.abs(x @ n - d) <= tol))
-            vi, si = vi[on], si[on]
-            # The plane's faces at each such vertex: which side of the line is each centroid on?
-            by_v = np.argsort(fvert, kind="stable")
-            start = np.searchsorted(fvert[by_v], verts[vi], side="left")
-            count = np.searchsorted(fvert[by_v], verts[vi], side="right") - start
-            pair, local, _ = ragged(count)
-            f_at = fo[by_v[start[pair] + local]]
-            side = np.einsum("ij,ij->i", centroid[f_at] - a[si[pair]], w[si[pair]])
-            pos = np.zeros(vi.size, dtype=bool)
-            neg = np.zeros(vi.size, dtype=bool)
-            np.logical_or.at(pos, pair, side > tol)
-            np.logical_or.at(neg, pair, side < -tol)
-            on_line[verts[vi[pos & neg]]] = True
-    if not out:
+    starts = np.cumsum(scene.face_sizes) - scene.face_sizes
+    fmin = np.minimum.reduceat(pos, starts, axis=0)
+    fmax = np.maximum.reduceat(pos, starts, axis=0)
+    valid_f = np.flatnonzero(scene.face_valid)
+    if planar.size == 0 or valid_f.size == 0:
         return Contacts(*_no_pairs(), on_line)
-    cols = [np.concatenate(c) for c in zip(*out)]
-    o = np.argsort(cols[0], kind="stable")
-    return Contacts(*(c[o] for c in cols), on_line)
+    cell = max(float(np.median(size[planar])), diag / GRID_CELLS, tol)
+    pc = patches.corners[planar]
+    pi, gi = _box_pairs(pc.min(axis=1) - tol, pc.max(axis=1) + tol, fmin[valid_f] - tol,
+                        fmax[valid_f] + tol, cell)
+    pi, gi = planar[pi], valid_f[gi]
+    keep = gi != face[pi]
+    pi, gi = pi[keep], gi[keep]
+    a, b, ok = contact_segments(scene, gi, n_f[pi], d_f[pi], tol)
+    pi, gi, a, b = pi[ok], gi[ok], a[ok], b[ok]
+    u, w, length = _lines_of(a, b, n_f[pi])
+    hit = _crossed(patches.corners[pi], k[pi], size[pi], a, u, w, length, tol)
+
+    # Vertices on a line with faces of the plane on both sides: per (face f of a patch, face g),
+    # the corners of f on g's segment, and which side of the line f's centroid is on.
+    fg = np.unique(np.stack([face[pi], gi], axis=1), axis=0, return_index=True)[1]
+    f, g = face[pi[fg]], gi[fg]
+    fa, fu, fw, fl = a[fg], u[fg], w[fg], length[fg]
+    owner, local, _ = ragged(scene.face_sizes[f])
+    vert = scene.corner_verts[scene.face_starts[f][owner] + local]
+    x = scene.vertices[vert]
+    centroid = np.zeros((f.size, 3))
+    np.add.at(centroid, owner, x)
+    centroid /= scene.face_sizes[f][:, None]
+    rel = x - fa[owner]
+    h = np.einsum("ij,ij->i", rel, fw[owner])
+    t = np.einsum("ij,ij->i", rel, fu[owner])
+    on = (np.abs(h) <= tol) & (t >= -tol) & (t <= fl[owner] + tol)
+    side = np.einsum("ij,ij->i", centroid[owner] - fa[owner], fw[owner])
+    e = np.flatnonzero(on & (np.abs(side) > tol))
+    if e.size:
+        key, group = np.unique(vert[e] * np.int64(scene.n_faces) + g[owner[e]],
+                               return_inverse=True)
+        group = group.reshape(-1)
+        pos_side = np.zeros(key.size, dtype=bool)
+        neg_side = np.zeros(key.size, dtype=bool)
+        np.logical_or.at(pos_side, group, side[e] > 0)
+        np.logical_or.at(neg_side, group, side[e] < 0)
+        on_line[key[pos_side & neg_side] // scene.n_faces] = True
+
+    pi, a, u, w, length = pi[hit], a[hit], u[hit], w[hit], length[hit]
+    o = np.lexsort((gi[hit], pi))
+    return Contacts(pi[o], a[o], u[o], w[o], length[o], on_line)
 
 
 def _no_pairs():
