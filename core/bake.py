@@ -562,13 +562,19 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
 
     result = _run(scene, settings, patches, None, None, level_monitor, timings, t_start, [],
                   alone=alone)
+    if levels:
+        result = _refine(scene, settings, patches, result, alone, progress, cancel, t_start)
     if contacts is not None:
         result.report["contacts"] = contacts
-    if levels == 0:
-        return result
+    return result
+
+
+def _refine(scene, settings, patches, result, alone, progress, cancel, t_start):
+    """Adaptive refinement after the first solve: split and re-solve, ``refine_levels`` times."""
     from .patches import subdivide_patches
     from .refine import refine_mask
 
+    levels = settings.refine_levels
     steps = [dict(level=0, patches=int(len(patches.areas)), split=0)]
     total = dict(result.report["timings"])
     min_area = (settings.patch_size / 2 ** levels) ** 2 / 2
@@ -592,8 +598,6 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     total["total"] = time.perf_counter() - t_start
     result.report["timings"] = total
     result.report["refinement"] = steps
-    if contacts is not None:
-        result.report["contacts"] = contacts
     return result
 
 
@@ -834,8 +838,8 @@ def _run(scene, settings, patches, store, active, monitor, timings, t_start, war
                 from .elements import make_elements
                 elements = make_elements(
                     scene, patches, node_radiance, levels=settings.element_levels,
-                    threshold=settings.element_threshold,
-                    crease_angle=settings.crease_angle, resolution=settings.resolution, rotate=settings.rotate_hemicube,
+                    threshold=settings.element_threshold, crease_angle=settings.crease_angle,
+                    resolution=settings.resolution, rotate=settings.rotate_hemicube,
                     rng=np.random.default_rng([settings.seed, 3]),
                     monitor=SubMonitor(monitor, 0.0, ELEMENT_SHARE))
                 seen = elements.patches
@@ -953,8 +957,9 @@ def make_reciprocal(F, areas, *, tol=RECIPROCITY_TOL, max_iterations=RECIPROCITY
     F_rec : (n, n), dtype of F
         ``areas[:, None] * F_rec`` is symmetric, ``F_rec.sum(1) == F.sum(1)`` within ``tol``.
     info : dict
-        ``asymmetry_before`` (see :func:`_asymmetry`), ``sinkhorn_iterations``,
-        ``row_sum_error`` (largest relative error left).
+        ``asymmetry_before`` (see :func:`_asymmetry`), ``sinkhorn_iterations`` (of the last
+        pass), ``row_sum_error`` (largest relative error left), ``unscaled`` (nodes left with
+        their own rows and columns).
     """
     F = np.asarray(F)
     areas = np.asarray(areas, dtype=np.float64)
@@ -964,7 +969,8 @@ def make_reciprocal(F, areas, *, tol=RECIPROCITY_TOL, max_iterations=RECIPROCITY
     if areas.shape != (n,) or not np.all(areas > 0):
         raise ValueError(f"areas must have shape ({n},) and be > 0; got {areas.shape}")
     info = dict(asymmetry_before=_asymmetry(F, areas))
-    target = areas * F.sum(axis=1, dtype=np.float64)
+    row_sum = F.sum(axis=1, dtype=np.float64)
+    target = areas * row_sum
     S = np.empty_like(F)
     a = areas.astype(F.dtype)
     for s in range(0, n, _BLOCK):
@@ -974,32 +980,31 @@ def make_reciprocal(F, areas, *, tol=RECIPROCITY_TOL, max_iterations=RECIPROCITY
     # Nodes that cannot be balanced keep their own rows and columns: nodes without a partner
     # (their row hits only nodes that see nothing), and groups whose row sums cannot all be met by
     # a symmetric scaling: two sets of patches shut inside a solid, each seeing mostly through the
-    # near walls and the other set only a little, have no solution (their scales diverge). The
-    # a pass that finds such nodes drops them, and the next balances the rest without them.
-    alone = np.zeros(n, dtype=bool)
+    # near walls and the other set only a little, have no solution (their scales diverge). A pass
+    # that finds such nodes drops them, and the next balances the rest without them.
+    unscaled = np.zeros(n, dtype=bool)
     for attempt in range(1, SINKHORN_PASSES + 1):
-        live = (target > 0) & ~alone
+        live = (target > 0) & ~unscaled
         while True:
             partnered = live & (S @ live.astype(S.dtype) > 0)
             if np.array_equal(partnered, live):
                 break
             live = partnered
-        alone |= (target > 0) & ~live
+        unscaled |= (target > 0) & ~live
         d, it, err, pinned = _sinkhorn(S, target, live, tol, max_iterations, monitor)
         failed = pinned if pinned.any() else live & ~(err <= SINKHORN_FAIL)
         if attempt == SINKHORN_PASSES or not failed.any():
             break
-        alone |= failed
-        idx = np.flatnonzero(alone)
+        unscaled |= failed
+        idx = np.flatnonzero(unscaled)
         S[idx] = 0
         S[:, idx] = 0
-        target = areas * (F.sum(axis=1, dtype=np.float64)
-                          - F[:, idx].sum(axis=1, dtype=np.float64))
+        target = areas * (row_sum - F[:, idx].sum(axis=1, dtype=np.float64))
         target[idx] = 0.0
     for s in range(0, n, _BLOCK):
         e = min(s + _BLOCK, n)
         S[s:e] *= (d[s:e] / areas[s:e])[:, None].astype(S.dtype) * d[None, :].astype(S.dtype)
-    idx = np.flatnonzero(alone)
+    idx = np.flatnonzero(unscaled)
     if idx.size:
         S[idx] = F[idx]
         S[:, idx] = F[:, idx]

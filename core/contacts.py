@@ -24,8 +24,8 @@ patch crossed by several lines is cut by each in turn (at most :data:`MAX_CUTS`)
 
 import numpy as np
 
-from .geometry import ragged
-from .patches import Patches, _assemble, _material_table
+from .geometry import newell_normals_areas, ragged
+from .patches import Patches, _assemble, _material_table, triangle_mask
 
 #: A vertex within this fraction of the scene's bounding diagonal from a plane lies in it (1 mm
 #: in a 10 m scene): an object placed on a floor by eye or by snapping touches it.
@@ -42,7 +42,6 @@ MIN_PIECE = 0.02
 
 #: Most cuts applied to one original patch (a patch under a chair leg meets 4 lines).
 MAX_CUTS = 8
-
 
 
 def _unit(v):
@@ -207,11 +206,13 @@ class Contacts:
         vertex on a box's outline, where the floor runs on under the box. The corners there see
         different light on the two sides of the line (a path tracer reads black inside), so the
         final gather treats each corner on its own (:mod:`core.gather`).
+    tol : float
+        The contact distance (m) they were found with.
     """
 
-    def __init__(self, patch, a, u, w, length, vertices):
+    def __init__(self, patch, a, u, w, length, vertices, tol):
         self.patch, self.a, self.u, self.w, self.length = patch, a, u, w, length
-        self.vertices = vertices
+        self.vertices, self.tol = vertices, tol
 
 
 #: The grid of the spatial join has at most this many cells along the scene's diagonal.
@@ -239,25 +240,22 @@ def find_contacts(scene, patches, *, tol=None):
     diag = scene.bounding_diagonal()
     if tol is None:
         tol = CONTACT_TOL * diag
-    V = scene.vertices.shape[0]
-    on_line = np.zeros(V, dtype=bool)
     face = patches.face
     n_f = scene.face_normals[face]
     d_f = np.einsum("ij,ij->i", scene.vertices[scene.corner_verts[scene.face_starts[face]]], n_f)
-    k = np.where(patches.is_triangle, 3, 4)
     # Patches lying in their face's plane (a warped face's patches are not cut).
     dev = np.abs(np.einsum("ikj,ij->ik", patches.corners, n_f) - d_f[:, None]).max(axis=1)
     planar = np.flatnonzero((dev <= tol) & scene.face_valid[face])
     size = np.sqrt(patches.areas)
-    # Face bounding boxes (corners are stored face after face).
-    corners, cf = scene.face_corner_indices()
+    # Face bounding boxes (face_corner_indices lists the corners face after face).
+    corners, _ = scene.face_corner_indices()
     pos = scene.vertices[scene.corner_verts[corners]]
     starts = np.cumsum(scene.face_sizes) - scene.face_sizes
     fmin = np.minimum.reduceat(pos, starts, axis=0)
     fmax = np.maximum.reduceat(pos, starts, axis=0)
     valid_f = np.flatnonzero(scene.face_valid)
     if planar.size == 0 or valid_f.size == 0:
-        return Contacts(*_no_pairs(), on_line)
+        return Contacts(*_no_pairs(), np.zeros(scene.vertices.shape[0], dtype=bool), tol)
     cell = max(float(np.median(size[planar])), diag / GRID_CELLS, tol)
     pc = patches.corners[planar]
     pi, gi = _box_pairs(pc.min(axis=1) - tol, pc.max(axis=1) + tol, fmin[valid_f] - tol,
@@ -268,24 +266,35 @@ def find_contacts(scene, patches, *, tol=None):
     a, b, ok = contact_segments(scene, gi, n_f[pi], d_f[pi], tol)
     pi, gi, a, b = pi[ok], gi[ok], a[ok], b[ok]
     u, w, length = _lines_of(a, b, n_f[pi])
-    hit = _crossed(patches.corners[pi], k[pi], size[pi], a, u, w, length, tol)
+    on_line = _vertices_on_lines(scene, face[pi], gi, a, u, w, length, tol)
+    hit = _crossed(patches.corners[pi], np.where(patches.is_triangle, 3, 4)[pi], size[pi],
+                   a, u, w, length, tol)
+    pi, a, u, w, length = pi[hit], a[hit], u[hit], w[hit], length[hit]
+    o = np.lexsort((gi[hit], pi))
+    return Contacts(pi[o], a[o], u[o], w[o], length[o], on_line, tol)
 
-    # Vertices on a line with faces of the plane on both sides: per (face f of a patch, face g),
-    # the corners of f on g's segment, and which side of the line f's centroid is on.
-    fg = np.unique(np.stack([face[pi], gi], axis=1), axis=0, return_index=True)[1]
-    f, g = face[pi[fg]], gi[fg]
-    fa, fu, fw, fl = a[fg], u[fg], w[fg], length[fg]
+
+def _vertices_on_lines(scene, f, g, a, u, w, length, tol):
+    """(V,) bool: vertices on a contact line with faces of its plane on both sides of it.
+
+    Rows are (face f in the plane, face g whose segment (a, u, w, length) lies in it); per
+    distinct (f, g), the corners of f on the segment and the side of the line f's centroid is on.
+    """
+    on_line = np.zeros(scene.vertices.shape[0], dtype=bool)
+    fg = np.unique(np.stack([f, g], axis=1), axis=0, return_index=True)[1]
+    f, g = f[fg], g[fg]
+    a, u, w, length = a[fg], u[fg], w[fg], length[fg]
     owner, local, _ = ragged(scene.face_sizes[f])
     vert = scene.corner_verts[scene.face_starts[f][owner] + local]
     x = scene.vertices[vert]
     centroid = np.zeros((f.size, 3))
     np.add.at(centroid, owner, x)
     centroid /= scene.face_sizes[f][:, None]
-    rel = x - fa[owner]
-    h = np.einsum("ij,ij->i", rel, fw[owner])
-    t = np.einsum("ij,ij->i", rel, fu[owner])
-    on = (np.abs(h) <= tol) & (t >= -tol) & (t <= fl[owner] + tol)
-    side = np.einsum("ij,ij->i", centroid[owner] - fa[owner], fw[owner])
+    rel = x - a[owner]
+    h = np.einsum("ij,ij->i", rel, w[owner])
+    t = np.einsum("ij,ij->i", rel, u[owner])
+    on = (np.abs(h) <= tol) & (t >= -tol) & (t <= length[owner] + tol)
+    side = np.einsum("ij,ij->i", centroid[owner] - a[owner], w[owner])
     e = np.flatnonzero(on & (np.abs(side) > tol))
     if e.size:
         key, group = np.unique(vert[e] * np.int64(scene.n_faces) + g[owner[e]],
@@ -296,10 +305,7 @@ def find_contacts(scene, patches, *, tol=None):
         np.logical_or.at(pos_side, group, side[e] > 0)
         np.logical_or.at(neg_side, group, side[e] < 0)
         on_line[key[pos_side & neg_side] // scene.n_faces] = True
-
-    pi, a, u, w, length = pi[hit], a[hit], u[hit], w[hit], length[hit]
-    o = np.lexsort((gi[hit], pi))
-    return Contacts(pi[o], a[o], u[o], w[o], length[o], on_line)
+    return on_line
 
 
 def _no_pairs():
@@ -365,7 +371,8 @@ def split_at_contacts(scene, patches, contacts=None, *, tol=None):
     contacts : Contacts, optional
         From :func:`find_contacts` for these patches (found here if not given).
     tol : float, optional
-        Contact distance in metres (default ``CONTACT_TOL`` x the scene's bounding diagonal).
+        Contact distance in metres when the contacts are found here (default ``CONTACT_TOL`` x
+        the scene's bounding diagonal); given contacts carry their own.
 
     Returns
     -------
@@ -382,10 +389,9 @@ def split_at_contacts(scene, patches, contacts=None, *, tol=None):
     if patches.incidence_slot is None:
         raise ValueError("patches.incidence_slot is None: split_at_contacts needs Patches made by "
                          "make_patches")
-    if tol is None:
-        tol = CONTACT_TOL * scene.bounding_diagonal()
     if contacts is None:
         contacts = find_contacts(scene, patches, tol=tol)
+    tol = contacts.tol
     pair_p, a, u, w, length = (contacts.patch, contacts.a, contacts.u, contacts.w,
                                contacts.length)
     P0 = patches.n_patches
@@ -406,8 +412,7 @@ def split_at_contacts(scene, patches, contacts=None, *, tol=None):
         uniq, first = np.unique(pair_p, return_index=True)
         now = np.zeros(pair_p.size, dtype=bool)
         now[first] = True
-        is_tri = np.all(corners[:, 3] == corners[:, 2], axis=1)
-        k = np.where(is_tri, 3, 4)
+        k = np.where(triangle_mask(corners), 3, 4)
         pieces, n_pieces = _cut(corners[uniq], k[uniq], a[now], w[now])
         info["cuts"] += int(uniq.size)
         n_child = np.ones(P, dtype=np.int64)
@@ -426,7 +431,7 @@ def split_at_contacts(scene, patches, contacts=None, *, tol=None):
         pos = corners[inc_p[e], inc_s[e]]
         eo, el, _ = ragged(n_child[inc_p[e]])
         child = start[inc_p[e]][eo] + el
-        k_new = np.where(np.all(new_corners[:, 3] == new_corners[:, 2], axis=1), 3, 4)
+        k_new = np.where(triangle_mask(new_corners), 3, 4)
         match = np.all(new_corners[child] == pos[eo][:, None, :], axis=2)
         match &= np.arange(4)[None, :] < k_new[child][:, None]
         has = match.any(axis=1)
@@ -441,9 +446,8 @@ def split_at_contacts(scene, patches, contacts=None, *, tol=None):
         ro, rl, _ = ragged(n_child[pair_p[rest]])
         r = rest[ro]
         rc = start[pair_p[r]] + rl
-        k_c = np.where(np.all(new_corners[rc, 3] == new_corners[rc, 2], axis=1), 3, 4)
-        size_c = _sizes(new_corners[rc])
-        hit = _crossed(new_corners[rc], k_c, size_c, a[r], u[r], w[r], length[r], tol)
+        size_c = np.sqrt(newell_normals_areas(new_corners[rc])[1])
+        hit = _crossed(new_corners[rc], k_new[rc], size_c, a[r], u[r], w[r], length[r], tol)
         pair_p, a, u, w, length = rc[hit], a[r[hit]], u[r[hit]], w[r[hit]], length[r[hit]]
         parent = parent[par]
         face = face[par]
@@ -452,10 +456,3 @@ def split_at_contacts(scene, patches, contacts=None, *, tol=None):
     n_faces = patches.face_patch_start.shape[0] - 1
     new = _assemble(corners, face, _material_table(patches), n_faces, inc_v, inc_p, inc_c, inc_s)
     return new, parent, info
-
-
-def _sizes(corners):
-    """sqrt of the area of quads / triangles (P, 4, 3)."""
-    d1 = corners[:, 2] - corners[:, 0]
-    d2 = corners[:, 3] - corners[:, 1]
-    return np.sqrt(0.5 * np.linalg.norm(np.cross(d1, d2), axis=1))

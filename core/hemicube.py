@@ -1027,7 +1027,8 @@ def draw_polygons(patches):
         A triangle repeats its last corner.
     poly_patch : (Q,) int64
     """
-    from .patches import patch_triangles  # deferred: keeps this module importable alone
+    # deferred: keeps this module importable alone
+    from .patches import patch_triangles, triangle_mask
 
     corners = np.asarray(patches.corners, dtype=np.float64)
     e1, e2, e3 = (corners[:, k] - corners[:, 0] for k in (1, 2, 3))
@@ -1038,7 +1039,7 @@ def draw_polygons(patches):
     off_plane = np.abs(np.sum(e3 * n, axis=1)) / np.where(length > 0, length, 1.0)
     edges = np.roll(corners, -1, axis=1) - corners
     turns = np.einsum("qkj,qj->qk", np.cross(edges, np.roll(edges, -1, axis=1)), n)
-    is_quad = ~np.all(corners[:, 3] == corners[:, 2], axis=1)
+    is_quad = ~triangle_mask(corners)
     whole = is_quad & (length > 0) & (off_plane <= _PLANAR_TOLERANCE * diagonal) \
         & np.all(turns > 0, axis=1)
     rest = np.flatnonzero(~whole)

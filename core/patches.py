@@ -90,7 +90,13 @@ class Patches:
     @property
     def is_triangle(self):
         """(P,) bool: patches that are triangles (last corner repeated)."""
-        return np.all(self.corners[:, 3] == self.corners[:, 2], axis=1)
+        return triangle_mask(self.corners)
+
+
+def triangle_mask(corners):
+    """(P,) bool: which of the 4-corner polygons ``corners`` (P, 4, 3) are triangles (last corner
+    repeated)."""
+    return np.all(corners[:, 3] == corners[:, 2], axis=1)
 
 
 def _check_max_edge(max_edge):
@@ -514,7 +520,7 @@ def patch_triangles(patches):
     corners = np.asarray(patches.corners, dtype=np.float64)
     if corners.ndim != 3 or corners.shape[1:] != (4, 3):
         raise ValueError(f"patches.corners must have shape (P, 4, 3); got {corners.shape}")
-    is_quad = ~np.all(corners[:, 3] == corners[:, 2], axis=1)
+    is_quad = ~triangle_mask(corners)
     first = corners[:, [0, 1, 2]]
     second = corners[is_quad][:, [0, 2, 3]]
     tris = np.concatenate([first, second])

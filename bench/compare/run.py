@@ -12,8 +12,9 @@ against wall time, log-log, one curve per method and one for Cycles, Pareto fron
 
 Reference: the mean of ``--reference-seeds`` Cycles seeds (default 2) at the largest sample count
 of the run (its own noise is estimated from the seeds' spread and written in the CSV as the
-``reference`` row: the error of any run cannot be measured below it). Error: area-weighted relative RMS of per-face luminance (face = mean
-of its corners), emitters excluded, and the 95th percentile (bench/compare/metrics.py).
+``reference`` row: the error of any run cannot be measured below it). Error: area-weighted
+relative RMS of per-face luminance (face = mean of its corners), emitters excluded, and the 95th
+percentile (bench/compare/metrics.py).
 """
 
 import argparse
@@ -227,7 +228,7 @@ def run_scene(name, blend, args, rng):
     cache.mkdir(exist_ok=True)
     stamp = "%s_%d" % (name, int(Path(blend).stat().st_mtime))
     top = samples[-1]
-    n_ref = max(2, args.reference_seeds)
+    n_ref = args.reference_seeds
     for spp in samples:
         for seed in range(n_ref if spp == top else 2):
             # Cycles bakes are cached per (.blend mtime, samples, seed): a rerun of the sweep
@@ -246,9 +247,9 @@ def run_scene(name, blend, args, rng):
             cyc[spp, seed] = (cc, sec, cpu)
     # The reference: the mean of the top count's seeds; its noise from their spread.
     ref_cc = np.mean([cyc[top, seed][0] for seed in range(n_ref)], axis=0)
-    ref_faces = metrics.face_values(ref_cc, arrays["face_starts"], arrays["face_sizes"])
     seed_faces = [metrics.face_values(cyc[top, seed][0], arrays["face_starts"],
                                       arrays["face_sizes"]) for seed in range(n_ref)]
+    ref_faces = np.mean(seed_faces, axis=0)     # face values are linear in the corners
     noise = metrics.reference_noise(seed_faces, area, keep)
     rows.append(dict(scene=name, engine="reference", method="cycles-%dseeds" % n_ref,
                      samples=top, t_total=sum(cyc[top, s][1] for s in range(n_ref)),
@@ -454,6 +455,8 @@ def main(argv=None):
         args.element_levels = [0, 1] if full else [0]
     if any(s < 1 for s in args.cycles_samples):
         ap.error("--cycles-samples must be >= 1")
+    if args.reference_seeds < 2:
+        ap.error("--reference-seeds must be >= 2 (the reference's noise comes from their spread)")
     Path(args.out).mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(args.seed)
     t_start = time.perf_counter()
