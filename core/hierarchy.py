@@ -315,11 +315,13 @@ def _weld(xyz, obj, size):
     uniq, inv = np.unique(rows, axis=0, return_inverse=True)
     inv = inv.reshape(-1)
     n = uniq.shape[0]
+    if n == 0:
+        return np.zeros((0, 3)), np.zeros(0, np.int64)
     tol = np.full(n, np.inf)
     np.minimum.at(tol, inv, WELD_REL * size)
     tol = np.where(np.isfinite(tol), tol, 0.0)
     pts, uobj = uniq[:, 1:], uniq[:, 0].astype(np.int64)
-    cell = 2.0 * float(tol.max()) if n else 0.0
+    cell = 2.0 * float(tol.max())
     ii, jj = [], []
     if cell > 0:
         base = pts.min(axis=0)

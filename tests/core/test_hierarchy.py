@@ -465,6 +465,20 @@ def test_parent_weights_reproduce_positions_and_linear_functions(scale):
     np.testing.assert_allclose(np.einsum("ck,ck->c", w, f_corner[src]), x @ g + c0, atol=1e-8)
 
 
+def test_parent_weights_chunks_agree(monkeypatch):
+    """Evaluated in many small chunks (as for a huge n-gon) the weights are the same."""
+    import core.conforming as conforming
+    scene = room_scene(rotate_seed=3)
+    _, tree = level0(scene, 0.5)
+    polys = tree.conforming()
+    fp = polys["face_parent"][np.repeat(np.arange(polys["face_sizes"].size), polys["face_sizes"])]
+    x = tree.points[polys["corner_verts"]]
+    src, w = parent_weights(scene, fp, x)
+    monkeypatch.setattr(conforming, "PAIR_CHUNK", 7)
+    src2, w2 = parent_weights(scene, fp, x)
+    assert np.array_equal(src, src2) and np.array_equal(w, w2)
+
+
 def test_output_mesh_and_as_patches():
     scene, patches, tree = random_tree(21, rounds=3, rotate_seed=4)
     polys = tree.conforming()
@@ -498,6 +512,8 @@ def test_errors_name_the_argument():
         tree.split([False] * E)
     with pytest.raises(TypeError, match="patches"):
         ElementTree.from_patches(scene, patches.corners)
+    with pytest.raises(ValueError, match="patches"):
+        ElementTree.from_patches(t_junction_wall(), patches)
     with pytest.raises(ValueError, match="face_parent_of_corner"):
         parent_weights(scene, np.array([0.5]), np.zeros((1, 3)))
     with pytest.raises(ValueError, match="face_parent_of_corner"):
