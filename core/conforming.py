@@ -21,7 +21,7 @@ FLAT_SINE = 1e-9
 PAIR_CHUNK = 1 << 20
 
 
-def clip_convex_rings(pos, count, normals):
+def clip_convex_rings(pos, count, normals, flat=None):
     """Triangulate convex polygons, some of whose vertices lie on straight edges, without new
     points and without zero-area triangles.
 
@@ -38,6 +38,11 @@ def clip_convex_rings(pos, count, normals):
         Vertices per ring (3..K).
     normals : (n, 3) float64
         Unit normal of each ring.
+    flat : (n, K) bool, optional
+        Vertices known to lie on the edge between their neighbours (hanging points). Given, the
+        flatness is tracked combinatorially (a clipped vertex's neighbours become corners), so
+        points off their line by input rounding (float32 coordinates) never form a sliver ear;
+        by default it comes from the turn at each vertex (``FLAT_SINE``).
 
     Returns
     -------
@@ -50,6 +55,8 @@ def clip_convex_rings(pos, count, normals):
     n, K = pos.shape[:2]
     count = np.asarray(count, dtype=np.int64)
     ring = np.broadcast_to(np.arange(K), (n, K)).copy()
+    known = flat is not None
+    flag = np.asarray(flat, dtype=bool).copy() if known else None
     c = count.copy()
     out_t, out_o = [], []
     active = np.flatnonzero(c >= 3)
@@ -71,9 +78,13 @@ def clip_convex_rings(pos, count, normals):
         tiny = np.finfo(float).tiny
         sine = np.einsum("ikj,ij->ik", np.cross(e1, e2), normals[act]) / np.maximum(l1 * l2, tiny)
         in_ring = j[None, :] < cc
-        strict = (sine > FLAT_SINE) & in_ring
-        flat = ~strict & in_ring
-        near_flat = np.take_along_axis(flat, ip, axis=1) | np.take_along_axis(flat, inx, axis=1)
+        if known:
+            strict = ~np.take_along_axis(flag[act], r, axis=1) & in_ring
+        else:
+            strict = (sine > FLAT_SINE) & in_ring
+        is_flat = ~strict & in_ring
+        near_flat = (np.take_along_axis(is_flat, ip, axis=1)
+                     | np.take_along_axis(is_flat, inx, axis=1))
         # Smallest angle of the ear (law of sines: proportional to the shortest side / area).
         area2 = np.abs(sine) * l1 * l2
         shape = area2 / np.maximum(np.maximum(np.maximum(l1, l2), l3) ** 2, tiny)
@@ -82,6 +93,10 @@ def clip_convex_rings(pos, count, normals):
         out_t.append(np.concatenate([np.take_along_axis(rp, pick, 1), np.take_along_axis(r, pick, 1),
                                      np.take_along_axis(rn, pick, 1)], axis=1))
         out_o.append(act)
+        if known:       # the clipped vertex's neighbours are corners of the rest
+            rows1 = act
+            flag[rows1, np.take_along_axis(rp, pick, 1)[:, 0]] = False
+            flag[rows1, np.take_along_axis(rn, pick, 1)[:, 0]] = False
         shift = np.minimum(j[None, :] + (j[None, :] >= pick), K - 1)
         ring[act] = np.take_along_axis(r, shift, axis=1)
         c[act] -= 1
@@ -106,15 +121,17 @@ def _build_templates():
         for pattern in range(16):
             if any(pattern >> e & 1 for e in range(4) if e not in edges) or pattern == 0:
                 continue
-            slots, pts = [], []
+            slots, pts, flat = [], [], []
             for e in edges:
                 slots.append(e if not (is_tri and e == 3) else 2)
                 pts.append(shape[slots[-1]])
+                flat.append(False)
                 if pattern >> e & 1:
                     slots.append(4 + e)
                     pts.append((shape[e] + shape[(e + 1) % 4]) / 2)
+                    flat.append(True)
             tris, _ = clip_convex_rings(np.array(pts)[None], np.array([len(pts)]),
-                                        np.array([[0.0, 0.0, 1.0]]))
+                                        np.array([[0.0, 0.0, 1.0]]), np.array([flat]))
             templates[pattern + 16 * is_tri] = np.array(slots)[tris]
     return templates
 

@@ -30,8 +30,13 @@ from .patches import (_QUAD_CHILDREN, _TRI_CHILDREN, Patches, _assemble, _connec
 WELD_REL = 1e-8
 
 #: A point lies inside an element edge (a T-junction) when its distance from the edge's line is
-#: at most this times the edge length and it is at least this far (relative) from both ends.
-ON_EDGE_REL = 1e-8
+#: at most this times the edge length (or FLOAT32_SLACK times the coordinates' magnitude) and
+#: it is at least this far (relative) from both ends.
+ON_EDGE_REL = 1e-6
+
+#: Blender hands over float32 coordinates: a vertex modelled on an edge is off its line by up to
+#: a few float32 roundings of the coordinates.
+FLOAT32_SLACK = 4.0 * float(np.finfo(np.float32).eps)
 
 #: Edge keys are lo * KEY_BASE + hi (point ids below 2**31).
 KEY_BASE = np.int64(1) << np.int64(31)
@@ -396,7 +401,9 @@ def _conform_level0(points, pid, normals):
         L2 = np.einsum("ij,ij->i", d, d)
         t = np.einsum("ij,ij->i", Q - X, d) / np.maximum(L2, np.finfo(float).tiny)
         off = np.linalg.norm(np.cross(d, Q - X), axis=1) / np.maximum(np.sqrt(L2), np.finfo(float).tiny)
-        inside = (t > ON_EDGE_REL) & (t < 1 - ON_EDGE_REL) & (off <= ON_EDGE_REL * np.sqrt(L2))
+        mag = np.maximum(np.abs(X).max(axis=1), np.abs(Y).max(axis=1))
+        inside = ((t > ON_EDGE_REL) & (t < 1 - ON_EDGE_REL)
+                  & (off <= np.maximum(ON_EDGE_REL * np.sqrt(L2), FLOAT32_SLACK * mag)))
         edge = (i % n_e)[inside]
         q = y[j][inside]
         if edge.size == 0:
@@ -420,7 +427,7 @@ def _conform_level0(points, pid, normals):
     count = np.bincount(e_leaf, minlength=P)
     fix = np.flatnonzero(count > k)
     order = np.lexsort((e_pos, e_leaf))
-    e_leaf, e_pt = e_leaf[order], e_pt[order]
+    e_leaf, e_pt, e_pos = e_leaf[order], e_pt[order], e_pos[order]
     K = int(count.max())
     start = np.cumsum(count) - count
     sel = np.isin(e_leaf, fix)
@@ -429,7 +436,9 @@ def _conform_level0(points, pid, normals):
     ring = np.zeros((fix.size, K), np.int64)
     ring[row, col] = e_pt[sel]
     ring = np.where(np.arange(K)[None, :] < count[fix][:, None], ring, ring[:, :1])
-    tris, owner = clip_convex_rings(points[ring], count[fix], normals[fix])
+    flat = np.zeros((fix.size, K), bool)
+    flat[row, col] = e_pos[sel] != np.floor(e_pos[sel])       # inserted points, not corners
+    tris, owner = clip_convex_rings(points[ring], count[fix], normals[fix], flat)
     tri_pts = np.take_along_axis(ring[owner], tris, axis=1)
     # Leaves: unchanged patches and the triangles of the fixed ones, in patch order.
     n_child = np.ones(P, np.int64)
