@@ -110,37 +110,62 @@ def _build_templates():
     """Triangles per hanging pattern, as slots into (p0, p1, p2, p3, m01, m12, m23, m30).
 
     Code = pattern bits (1 << edge slot) + 16 for triangles (edge slot 2 of a triangle, p2 -> p3,
-    has zero length and never hangs). Built once by clipping the canonical square / triangle: the
-    combinatorics hold for every convex quad and every triangle (the same vertices are flat).
+    has zero length and never hangs). Built once by clipping a few canonical shapes (square,
+    oblongs, parallelograms; right, flat and tall triangles): with the hanging points flagged the
+    clipping is combinatorial, so every variant is valid for every convex quad / triangle, and
+    the variants differ only in which diagonals they take (chosen per element by shape).
     """
-    square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=np.float64)
-    triangle = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 1, 0]], dtype=np.float64)
-    templates = {}
-    for is_tri, shape in ((False, square), (True, triangle)):
+    quads = [[[0, 0], [1, 0], [1, 1], [0, 1]], [[0, 0], [2, 0], [2, 1], [0, 1]],
+             [[0, 0], [1, 0], [1, 2], [0, 2]], [[0, 0], [1, 0], [1.8, 1], [0.8, 1]],
+             [[0, 0], [1, 0], [0.2, 1], [-0.8, 1]]]
+    tris = [[[0, 0], [1, 0], [0, 1]], [[0, 0], [1, 0], [0.5, 0.25]], [[0, 0], [1, 0], [1.2, 1.5]],
+            [[0, 0], [1, 0], [-0.3, 1.5]]]
+    variants = {}
+    for is_tri, shapes in ((False, quads), (True, tris)):
         edges = (0, 1, 3) if is_tri else (0, 1, 2, 3)
-        for pattern in range(16):
-            if any(pattern >> e & 1 for e in range(4) if e not in edges) or pattern == 0:
-                continue
-            slots, pts, flat = [], [], []
-            for e in edges:
-                slots.append(e if not (is_tri and e == 3) else 2)
-                pts.append(shape[slots[-1]])
-                flat.append(False)
-                if pattern >> e & 1:
-                    slots.append(4 + e)
-                    pts.append((shape[e] + shape[(e + 1) % 4]) / 2)
-                    flat.append(True)
-            tris, _ = clip_convex_rings(np.array(pts)[None], np.array([len(pts)]),
-                                        np.array([[0.0, 0.0, 1.0]]), np.array([flat]))
-            templates[pattern + 16 * is_tri] = np.array(slots)[tris]
-    return templates
+        for shape in shapes:
+            shape = np.column_stack([np.array(shape, float), np.zeros(len(shape))])
+            if is_tri:
+                shape = np.vstack([shape, shape[2:]])
+            for pattern in range(1, 16):
+                if any(pattern >> e & 1 for e in range(4) if e not in edges):
+                    continue
+                slots, pts, flat = [], [], []
+                for e in edges:
+                    slots.append(e if not (is_tri and e == 3) else 2)
+                    pts.append(shape[slots[-1]])
+                    flat.append(False)
+                    if pattern >> e & 1:
+                        slots.append(4 + e)
+                        pts.append((shape[e] + shape[(e + 1) % 4]) / 2)
+                        flat.append(True)
+                t, _ = clip_convex_rings(np.array(pts)[None], np.array([len(pts)]),
+                                         np.array([[0.0, 0.0, 1.0]]), np.array([flat]))
+                tmpl = np.array(slots)[t]
+                known = variants.setdefault(pattern + 16 * is_tri, [])
+                canon = sorted(tuple(np.roll(tr, -int(np.argmin(tr)))) for tr in tmpl.tolist())
+                if all(canon != sorted(tuple(np.roll(tr, -int(np.argmin(tr)))) for tr in k.tolist())
+                       for k in known):
+                    known.append(tmpl)
+    return variants
 
 
-#: code -> (t, 3) slots into (p0, p1, p2, p3, m01, m12, m23, m30); see _build_templates.
-TEMPLATES = _build_templates()
+#: code -> list of (t, 3) slot arrays into (p0, p1, p2, p3, m01, m12, m23, m30), the first from
+#: the square / right triangle; see _build_templates.
+TEMPLATE_VARIANTS = _build_templates()
+#: code -> the first variant.
+TEMPLATES = {code: v[0] for code, v in TEMPLATE_VARIANTS.items()}
 
 
-def triangulate_hanging(leaves, is_tri, mids):
+def _quality(tri_pts):
+    """(..., ) smallest triangle quality (2 area / longest edge^2) over axis -3 of (..., t, 3, 3)."""
+    e = np.roll(tri_pts, -1, axis=-2) - tri_pts
+    area2 = np.linalg.norm(np.cross(e[..., 0, :], -e[..., 2, :]), axis=-1)
+    longest = np.max(np.einsum("...ij,...ij->...i", e, e), axis=-1)
+    return (area2 / np.maximum(longest, np.finfo(float).tiny)).min(axis=-1)
+
+
+def triangulate_hanging(leaves, is_tri, mids, points=None):
     """Conforming polygons of leaves whose edges carry their neighbours' midpoints.
 
     Parameters
@@ -150,6 +175,9 @@ def triangulate_hanging(leaves, is_tri, mids):
     is_tri : (E,) bool
     mids : (E, 4) int64
         Point id of the midpoint hanging on each edge slot, -1 where none.
+    points : (V, 3) float64, optional
+        Given, each leaf takes the variant of its template whose worst triangle is best shaped;
+        otherwise the first variant.
 
     Returns
     -------
@@ -168,9 +196,14 @@ def triangulate_hanging(leaves, is_tri, mids):
     local = [np.zeros(leaf[0].size, np.int64)]
     for c in np.unique(code[~plain]):          # one pass per hanging pattern (at most 22)
         sel = np.flatnonzero(code == c)
-        tmpl = TEMPLATES[int(c)]
-        tri = table[sel][:, tmpl]               # (n, t, 3)
-        t = tmpl.shape[0]
+        options = TEMPLATE_VARIANTS[int(c)] if points is not None else TEMPLATES[int(c)][None]
+        t = options[0].shape[0]                 # every variant of a pattern has as many triangles
+        tri = table[sel][:, np.asarray(options)]                         # (n, variants, t, 3)
+        if len(options) > 1:
+            best = np.argmax(_quality(points[tri]), axis=1)
+            tri = tri[np.arange(sel.size), best]
+        else:
+            tri = tri[:, 0]
         poly.append(np.concatenate([tri, tri[:, :, 2:]], axis=2).reshape(-1, 4))
         size.append(np.full(sel.size * t, 3, np.int64))
         leaf.append(np.repeat(sel, t))

@@ -276,7 +276,8 @@ class ElementTree:
 
         Leaves without hanging midpoints are kept (quads stay quads); the others are
         triangulated by the template of their hanging pattern, over their corners and the
-        hanging midpoints only.
+        hanging midpoints only (of the template's variants, the one with the best-shaped worst
+        triangle for that leaf).
 
         Returns
         -------
@@ -284,7 +285,7 @@ class ElementTree:
             corner_verts (C,), face_starts (F,), face_sizes (F,) in {3, 4}, face_parent (F,)
             scene face, face_leaf (F,) leaf; all int64, faces in leaf order.
         """
-        out = triangulate_hanging(self.leaves, self.is_triangle, self._hanging_mids())
+        out = triangulate_hanging(self.leaves, self.is_triangle, self._hanging_mids(), self.points)
         out["face_parent"] = self.leaf_face[out["face_leaf"]]
         return out
 

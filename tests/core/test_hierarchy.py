@@ -9,7 +9,7 @@ polygon by ray crossing, linear functions interpolated exactly.
 import numpy as np
 import pytest
 
-from core.conforming import TEMPLATES, clip_convex_rings, parent_weights, triangulate_hanging
+from core.conforming import TEMPLATE_VARIANTS, TEMPLATES, clip_convex_rings, parent_weights, triangulate_hanging
 from core.contacts import split_at_contacts
 from core.hierarchy import ElementTree, output_mesh
 from core.outmesh import OutputMesh
@@ -410,22 +410,36 @@ def test_templates_on_random_convex_elements(code):
         leaves[:, 3] = leaves[:, 2]
     hang = (code % 16 >> np.arange(4)) & 1
     mids = np.where(hang[None].astype(bool), ids[:, 4:], -1)
-    out = triangulate_hanging(leaves, np.full(n, is_tri), mids)
-    assert np.all(out["face_sizes"] == 3)
-    cv = out["corner_verts"].reshape(-1, 3)
-    t = pts[cv]
     normals = np.array(normals)
-    signed = np.einsum("ij,ij->i", np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]),
-                       normals[out["face_leaf"]]) / 2
-    assert signed.min() > 0
     c = pts[leaves]
     area = np.linalg.norm(sum(np.cross(c[:, k], c[:, (k + 1) % 4]) for k in range(4)), axis=1) / 2
+    table = np.concatenate([leaves, mids], axis=1)
+    worst = []
+    for tmpl in TEMPLATE_VARIANTS[code]:        # each variant alone, then the per-leaf choice
+        cv = table[:, tmpl]                     # (n, t, 3)
+        t = pts[cv]
+        signed = np.einsum("itj,ij->it", np.cross(t[:, :, 1] - t[:, :, 0], t[:, :, 2] - t[:, :, 0]),
+                           normals) / 2
+        assert signed.min() > 0
+        np.testing.assert_allclose(signed.sum(axis=1), area, rtol=1e-12)
+        edges = np.sort(np.stack([cv, np.roll(cv, -1, axis=2)], 3).reshape(-1, 2), axis=1)
+        key, count = np.unique(edges, axis=0, return_counts=True)
+        n_boundary = (3 if is_tri else 4) + int(hang.sum())
+        assert np.count_nonzero(count == 1) == n * n_boundary
+        assert count.max() == 2
+        longest = np.max([np.sum((t[:, :, k] - t[:, :, (k + 1) % 3]) ** 2, axis=2) for k in range(3)],
+                         axis=0)
+        worst.append((2 * signed / longest).min(axis=1))
+    out = triangulate_hanging(leaves, np.full(n, is_tri), mids, pts)
+    assert np.all(out["face_sizes"] == 3)
+    t = pts[out["corner_verts"].reshape(-1, 3)]
+    signed = np.einsum("ij,ij->i", np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]),
+                       normals[out["face_leaf"]]) / 2
     np.testing.assert_allclose(np.bincount(out["face_leaf"], signed), area, rtol=1e-12)
-    edges = np.sort(np.stack([cv, np.roll(cv, -1, axis=1)], 2).reshape(-1, 2), axis=1)
-    key, count = np.unique(edges, axis=0, return_counts=True)
-    n_boundary = (3 if is_tri else 4) + int(hang.sum())
-    assert np.count_nonzero(count == 1) == n * n_boundary
-    assert count.max() == 2
+    longest = np.max([np.sum((t[:, k] - t[:, (k + 1) % 3]) ** 2, axis=1) for k in range(3)], axis=0)
+    chosen = np.full(n, np.inf)
+    np.minimum.at(chosen, out["face_leaf"], 2 * signed / longest)
+    np.testing.assert_allclose(chosen, np.max(worst, axis=0), rtol=1e-9)
 
 
 def _inside_polygon(xy, poly):
