@@ -15,6 +15,27 @@ Pure geometry; which leaves to split (by light contrast) is the driver's busines
   at most one midpoint hangs on any edge and the templates of :mod:`core.conforming` suffice.
 
 Sizes: V points, E leaves, P patches.
+
+Examples
+--------
+Two 1 m squares (floor and emitter) in 0.5 m patches; split one floor patch: its two
+neighbours then carry a hanging midpoint each and are triangulated in the output.
+
+>>> import numpy as np
+>>> from core import samples
+>>> from core.patches import make_patches
+>>> scene = samples.opposed_squares()
+>>> tree = ElementTree.from_patches(scene, make_patches(scene, 0.5))
+>>> tree.n_leaves
+8
+>>> mask = np.zeros(tree.n_leaves, dtype=bool)
+>>> mask[0] = True
+>>> tree, parent = tree.split(mask)
+>>> tree.n_leaves, int(tree.hanging().sum())
+(11, 2)
+>>> polys = tree.conforming()
+>>> sorted(set(polys["face_sizes"].tolist()))
+[3, 4]
 """
 
 import numpy as np

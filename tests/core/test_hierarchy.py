@@ -530,6 +530,14 @@ def test_output_mesh_and_as_patches():
     assert np.array_equal(np.unique(patches.incidence_corner), valid_corners)
 
 
+def test_module_example_runs():
+    import doctest
+
+    import core.hierarchy
+    result = doctest.testmod(core.hierarchy)
+    assert result.attempted >= 8 and result.failed == 0
+
+
 def test_errors_name_the_argument():
     scene, patches, tree = random_tree(0, rounds=1)
     E = tree.n_leaves
