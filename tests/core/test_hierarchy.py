@@ -221,6 +221,28 @@ def test_user_t_junctions_are_made_conforming(rounds, offset):
     assert _assert_conforming(scene, tree, on_segment=ON_SEGMENT_REL if offset is None else 1e-5) == [0]
 
 
+def test_floating_t_junctions_are_made_conforming():
+    """A lintel quad resting on a wall's top edge, same object, no vertex shared: its bottom
+    corners lie inside the wall's edge and the wall's patch corners inside the lintel's."""
+    v = np.array([[0, 0, 0], [4, 0, 0], [4, 0, 1], [0, 0, 1],
+                  [1.3, 0, 1], [3.1, 0, 1], [3.1, 0, 1.5], [1.3, 0, 1.5]], float)
+    v = v @ _rotation(np.random.default_rng(9)).T
+    scene = scene_from_polygons(v, [[0, 1, 2, 3], [4, 5, 6, 7]], [1, 0], RHO, LE)
+    patches = make_patches(scene, 0.45)
+    tree = ElementTree.from_patches(scene, patches)
+    assert tree.n_leaves > patches.n_patches
+    rng = np.random.default_rng(1)
+    for _ in range(3):
+        tree, _ = tree.split(rng.random(tree.n_leaves) < 0.4)
+        np.testing.assert_allclose(np.bincount(tree.leaf_face, tree.areas, minlength=2),
+                                   scene.face_areas, rtol=AREA_RTOL)
+        polys = tree.conforming()
+        a, b, _ = _polygon_edges(polys)
+        key = np.unique(np.stack([np.minimum(a, b), np.maximum(a, b)], 1), axis=0)
+        assert _points_inside_segments(tree.points, key[:, 0], key[:, 1],
+                                       np.unique(polys["corner_verts"])).max() == 0
+
+
 def _assert_conforming(scene, tree, on_segment=ON_SEGMENT_REL):
     """Check the conforming output object by object; returns the objects with open boundaries."""
     polys = tree.conforming()
