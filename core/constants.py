@@ -35,3 +35,7 @@ DEFAULT_CREASE_ANGLE = 30.0
 
 #: Progress and cancel are polled at least this often (seconds of work).
 POLL_INTERVAL = 0.2
+
+#: Largest hemicube resolution: the rasteriser's pixel indices of one chunk must be exact in
+#: float32 (3 R^2 < 2^24).
+MAX_RESOLUTION = 2048

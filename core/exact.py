@@ -28,7 +28,9 @@ i.e. ~50x a R = 64 hemicube row; source_order="adaptive" adds ~60% on a room.
 import numpy as np
 
 from .constants import SURFACE_OFFSET
+from .hemicube import hemicube_rows
 from .raycast import BVH, build_bvh, closest_hit
+from .settings import BY_NAME
 
 #: A polygon whose highest corner is below this fraction of its distance from the point, measured
 #: along the point's normal, lies in the point's tangent plane (or under it): F = 0. Without this,
@@ -36,13 +38,13 @@ from .raycast import BVH, build_bvh, closest_hit
 COPLANAR_TOL = 1e-12
 
 #: Hybrid default: a pair is "near" when its centre distance is below NEAR_DEFAULT times the larger
-#: patch size (sqrt of area). Measured by bench/bench_exact.py (near sweep): the point-source
-#: (centre) error of opposed unit squares is +19.8% at distance = 1 size, +7.1% at 2, +3.4% at 3,
-#: +2.0% at 4, +1.3% at 5 (about 0.3 / k^2), whatever the hemicube resolution. At 4 it is below
-#: the aliasing of an R = 64 hemicube on such pairs (several %), and the near pairs of a uniform
-#: mesh stay a few % of all pairs: on room_with_boxes(2000) the hybrid costs 1.5x the plain
-#: hemicube (near = 6: 2.5x).
-NEAR_DEFAULT = 4.0
+#: patch size (sqrt of area); the bake's ``near`` setting (core.settings), one default for both.
+#: Measured by bench/bench_exact.py (near sweep): the point-source (centre) error of opposed unit
+#: squares is +19.8% at distance = 1 size, +7.1% at 2, +3.4% at 3, +2.0% at 4, +1.3% at 5 (about
+#: 0.3 / k^2), whatever the hemicube resolution; on room_with_boxes(2000) near = 4 costs 1.5x the
+#: plain hemicube (near = 6: 2.5x). Bakes have always used 1.5 (the adjacent and nearest pairs,
+#: where the error is largest), so that is the default.
+NEAR_DEFAULT = BY_NAME["near"].default
 
 #: Source quadrature of the hybrid's near pairs: Gauss-Legendre n x n points on the source patch,
 #: n rising through ADAPTIVE_ORDERS until two successive orders agree to ADAPTIVE_TOL (relative).
@@ -527,8 +529,6 @@ def hybrid_rows(patches, sources, *, resolution=64, near=NEAR_DEFAULT, rays=16, 
     (S, 2P) float64
         Both columns (q and q + P) of every near pair come from the exact method.
     """
-    from .hemicube import hemicube_rows
-
     geo = _Geometry(patches, bvh)
     p = geo.n_patches
     nodes = _check_sources(sources, 2 * p)

@@ -52,7 +52,7 @@ import weakref
 
 import numpy as np
 
-from .constants import HEMICUBE_NEAR, SURFACE_OFFSET
+from .constants import HEMICUBE_NEAR, MAX_RESOLUTION, SURFACE_OFFSET
 from .geometry import ragged
 
 #: Face names in pixel-buffer order: the top face, then the sides along +x, -x, +y, -y of the
@@ -98,8 +98,8 @@ _ROW_SLACK = 1e-3
 #: less than a pixel at any resolution allowed.
 _PLANAR_TOLERANCE = 1e-6
 
-#: Largest resolution: pixel indices of one chunk are exact in float32 (3 R^2 < 2^24).
-_MAX_RESOLUTION = 2048
+#: Largest resolution (see core.constants).
+_MAX_RESOLUTION = MAX_RESOLUTION
 
 _LITTLE_ENDIAN = sys.byteorder == "little"
 
