@@ -203,7 +203,7 @@ def make_patches(scene, max_edge):
     Notes
     -----
     See the module docstring for the scheme. Measured patch counts (``max_edge`` 0.5 / 0.25 /
-    0.1 m): ``samples.cornell_box()`` 35 / 84 / 336; ``samples.room_with_boxes(2000)`` 1966 /
+    0.1 m): ``bench.scenes.cornell_box()`` 35 / 84 / 336; ``bench.scenes.room_with_boxes(2000)`` 1966 /
     2294 / 17694 (at 0.5 m every input quad already is one patch).
     """
     h = _check_max_edge(max_edge)

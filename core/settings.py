@@ -274,8 +274,8 @@ def _docstring():
 
 
 def _post_init(self):
-    for row in TABLE:
-        row.check(getattr(self, row.name))
+    for name, row in BY_NAME.items():
+        row.check(getattr(self, name))
 
 
 BakeSettings = dataclasses.make_dataclass(

@@ -13,7 +13,7 @@ from core.bake import make_reciprocal
 from core.contacts import CONTACT_TOL, find_contacts, split_at_contacts
 from core.errors import SettingsError
 from core.patches import make_patches
-from core.samples import _Builder
+from bench.scenes import _Builder
 
 FLOOR, BOX, WALL, LAMP = 0, 1, 2, 3
 

@@ -15,7 +15,7 @@ from core import BakeSettings, SettingsError, bake, relight, scene_from_polygons
 from core.elements import make_elements
 from core.exact import point_polygon_form_factor
 from core.patches import make_patches
-from core.samples import furnace_box
+from bench.scenes import furnace_box
 
 H, DROP, LE, RHO_CEILING, RHO_FLOOR = 1.5, 0.05, 10.0, 0.8, 1e-3
 PANEL = (0.75, 1.25)            # x and y extent: its edges cut the 0.5 m ceiling faces in half

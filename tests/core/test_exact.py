@@ -336,7 +336,7 @@ def test_closed_room_with_boxes_sum_rule_and_hemicube_agreement():
     # over 4 seeds x 8 sources; the test allows 4x and 2x that.
     from core.hemicube import hemicube_rows
     from core.patches import make_patches
-    from core.samples import room_with_boxes
+    from bench.scenes import room_with_boxes
 
     pat = make_patches(room_with_boxes(150), 10.0)
     p = pat.centres.shape[0]
@@ -399,7 +399,7 @@ def test_hybrid_keeps_the_hemicube_row_sums_in_the_room():
     # where plain replacement overshoots: their rows exceed 1 without it.
     from core.hemicube import hemicube_rows
     from core.patches import make_patches
-    from core.samples import room_with_boxes
+    from bench.scenes import room_with_boxes
 
     pat = make_patches(room_with_boxes(300), 10.0)
     panel_centre = pat.centres[pat.material == 4].mean(axis=0)

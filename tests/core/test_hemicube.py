@@ -575,7 +575,7 @@ def test_quads_whole_cover_the_same_pixels_as_their_triangles():
 def test_setup_cache_follows_the_patches_object():
     # hemicube_rows caches the per-scene setup of the last Patches object: alternating between
     # two scenes must give each its own rows, equal to an uncached computation.
-    samples = pytest.importorskip("core.samples")
+    from bench import scenes as samples
     patches_mod = pytest.importorskip("core.patches")
     cube = patches_mod.make_patches(samples.unit_cube(n=2), max_edge=0.5)
     squares = patches_mod.make_patches(samples.opposed_squares(n=2), max_edge=0.5)
@@ -590,7 +590,7 @@ def test_setup_cache_follows_the_patches_object():
 
 
 def test_with_real_patches_of_a_sample_scene():
-    samples = pytest.importorskip("core.samples")
+    from bench import scenes as samples
     patches_mod = pytest.importorskip("core.patches")
     scene = samples.unit_cube(n=3)
     patches = patches_mod.make_patches(scene, max_edge=0.5)

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from core import SettingsError, samples, scene_from_polygons
+from bench import scenes as samples
+from core import SettingsError, scene_from_polygons
 from core.geometry import newell_vectors
 from core.patches import make_patches, patch_triangles, subdivide_patches
 

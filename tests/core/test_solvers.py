@@ -5,7 +5,7 @@ import pytest
 
 from core.errors import BakeCancelled
 from core.progress import Monitor
-from core.samples import unit_cube
+from bench.scenes import unit_cube
 from core.solvers import (SolveResult, ambient_radiance, solve_direct, solve_gauss_seidel,
                           solve_jacobi, solve_progressive)
 
