@@ -23,7 +23,8 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-from core.hemicube import _Geometry, draw_polygons, polygon_rows  # noqa: E402
+from core.hemicube import draw_polygons, polygon_rows
+from core.hemicube_chunk import Geometry  # noqa: E402
 from core.patches import make_patches  # noqa: E402
 from bench.scenes import room_with_boxes  # noqa: E402
 
@@ -37,10 +38,10 @@ def room_patches(n_quads):
 
 
 def setup(patches):
-    """(polys, poly_patch, _Geometry): the per-scene setup, made once per scene as
+    """(polys, poly_patch, Geometry): the per-scene setup, made once per scene as
     hemicube_rows caches it across a bake's calls."""
     polys, poly_patch = draw_polygons(patches)
-    return polys, poly_patch, _Geometry(polys, poly_patch, patches.normals)
+    return polys, poly_patch, Geometry(polys, poly_patch, patches.normals)
 
 
 def run(patches, drawn, sources, resolution, batch, *, rotate=False):

@@ -153,8 +153,8 @@ class Setting:
         return value
 
 
-#: Longest panel label (characters): what Blender's default sidebar shows uncut.
-MAX_LABEL = 14
+#: Longest panel label (characters): about what Blender's default sidebar shows uncut.
+MAX_LABEL = 15
 
 METHODS = (
     Choice("hemicube", "Hemicube", "Cohen-Greenberg hemicube, made reciprocal (default: on the "
@@ -198,24 +198,24 @@ TABLE = (
     Setting("max_iterations", "int", DEFAULT_MAX_ITERATIONS, "Iteration Cap",
             "Sweep cap of Jacobi / Gauss-Seidel (progressive: shots capped at 50 x nodes)",
             low=1, exposed=True),
-    Setting("corners", "choice", "gather", "Corners", "How corner colours are made from the "
+    Setting("corners", "choice", "gather", "Corner Colours", "How corner colours are made from the "
             "solution", choices=CORNERS, exposed=True,
             doc="'gather' costs about one more hemicube per vertex; 'average' is free but a "
                 "patch-mean value: off by tens of percent next to luminaires, in room corners "
                 "and along shadow edges."),
-    Setting("refine_levels", "int", 0, "Adaptive Lvls",
+    Setting("refine_levels", "int", 0, "Adaptive Levels",
             "Split patches where the solved light changes between neighbours and solve again, "
             "this many times (0: off)", low=0, high=4, exposed=True,
             doc="Patches are spent where the light changes: shadow edges, light footprints, room "
                 "corners (core.refine)."),
-    Setting("element_levels", "int", 2, "Receiver Lvls",
+    Setting("element_levels", "int", 2, "Receiver Levels",
             "After the solve, split patches where the light changes into smaller receivers for "
             "the vertex colours, this many times (no re-solve; 0: off)", low=0, high=3,
             exposed=True,
             doc="corners='gather' only (core.elements). The vertex gather then sees the light's "
                 "gradient across a patch instead of its mean. Costs one hemicube per new "
                 "element."),
-    Setting("contact_cuts", "bool", True, "Contact Cuts",
+    Setting("contact_cuts", "bool", True, "Cut at Contacts",
             "Cut patches along the lines where objects touch or pierce a surface (a box on a "
             "floor), so no light leaks under objects and their feet are not too dark",
             exposed=True, doc="core.contacts."),

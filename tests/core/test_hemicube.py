@@ -11,6 +11,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from core import hemicube, hemicube_chunk, hemicube_raster
 from core.hemicube import (FACE_NAMES, delta_form_factors, draw_polygons, hemicube_rows,
                            polygon_rows)
 
@@ -606,13 +607,11 @@ def test_rows_do_not_depend_on_how_fragments_are_blocked(monkeypatch):
     # a negative key) and the rest of longer spans in a second pass. Blocks of 3 spans put
     # block edges everywhere; the rows must be bit-identical, and closed-box rows still sum
     # to 1 (a padding slot that wrote a pixel, or a lost fragment, would break one of both).
-    import core.hemicube as hemicube
-
     corners, _ = box_quads((1.0, 1.0, 1.0), 0.25)
     patches = make_patches(corners)
     sources = np.arange(0, corners.shape[0], 7)
     whole = hemicube_rows(patches, sources, resolution=32, rotate=True, rng=2)
-    monkeypatch.setattr(hemicube, "_FRAG_BLOCK", 3)
+    monkeypatch.setattr(hemicube_raster, "_FRAG_BLOCK", 3)
     blocked = hemicube_rows(patches, sources, resolution=32, rotate=True, rng=2)
     assert np.array_equal(whole, blocked)
     assert np.allclose(whole.sum(axis=1), 1.0, atol=1e-12)
@@ -630,13 +629,11 @@ def test_rows_do_not_depend_on_how_items_are_blocked(monkeypatch):
     # Items are set up and drawn _ITEM_BLOCK at a time, and the rest of long spans is held
     # back until _FRAG_BLOCK of them wait; the item ids (and so the tie rule) do not depend on
     # either. Tiny blocks put block edges everywhere, in the main, face and general groups.
-    import core.hemicube as hemicube
-
     patches = _room_with_furniture()
     sources = np.arange(0, patches.centres.shape[0], 5)
     whole = hemicube_rows(patches, sources, resolution=32, rotate=True, rng=4)
-    monkeypatch.setattr(hemicube, "_ITEM_BLOCK", 7)
-    monkeypatch.setattr(hemicube, "_FRAG_BLOCK", 5)
+    monkeypatch.setattr(hemicube_raster, "_ITEM_BLOCK", 7)
+    monkeypatch.setattr(hemicube_raster, "_FRAG_BLOCK", 5)
     blocked = hemicube_rows(patches, sources, resolution=32, rotate=True, rng=4)
     assert np.array_equal(whole, blocked)
     assert np.allclose(whole.sum(axis=1), 1.0, atol=1e-12)
@@ -646,12 +643,10 @@ def test_polygons_beyond_a_face_are_dropped_only_when_clipping_would_drop_them(m
     # Polygons straddling a face's near plane are first tested against the planes through the
     # eye and the face's borders (with a margin) and clipped only if they may reach the face.
     # Without that test (an infinite margin drops nothing) the rows must be the same.
-    import core.hemicube as hemicube
-
     patches = _room_with_furniture()
     sources = np.arange(patches.centres.shape[0])
     fast = hemicube_rows(patches, sources, resolution=16)
-    monkeypatch.setattr(hemicube, "_PYRAMID_MARGIN", np.inf)
+    monkeypatch.setattr(hemicube_chunk, "_PYRAMID_MARGIN", np.inf)
     hemicube._CACHE.clear()
     slow = hemicube_rows(patches, sources, resolution=16)
     assert np.array_equal(fast, slow)
