@@ -31,6 +31,7 @@ from .constants import SURFACE_OFFSET
 from .hemicube import hemicube_rows
 from .raycast import BVH, build_bvh, closest_hit
 from .settings import BY_NAME
+from .validate import check_bool, check_sources, is_int, is_real
 
 #: A polygon whose highest corner is below this fraction of its distance from the point, measured
 #: along the point's normal, lies in the point's tangent plane (or under it): F = 0. Without this,
@@ -278,20 +279,8 @@ def _same_triangles(bvh, tris):
             and np.array_equal(bvh.e2, t[:, 2] - t[:, 0]))
 
 
-def _check_sources(sources, n_nodes):
-    s = np.asarray(sources)
-    if s.ndim != 1 or not (np.issubdtype(s.dtype, np.integer) or s.size == 0):
-        raise ValueError(f"sources must be a 1-D array of integer node ids; got dtype {s.dtype}, "
-                         f"shape {s.shape}")
-    s = s.astype(np.int64)
-    if s.size and (s.min() < 0 or s.max() >= n_nodes):
-        bad = s[(s < 0) | (s >= n_nodes)][0]
-        raise ValueError(f"sources must be node ids in [0, {n_nodes}); got {bad}")
-    return s
-
-
 def _check_common(rays, rng):
-    if isinstance(rays, bool) or not isinstance(rays, (int, np.integer)) or rays < 1:
+    if not is_int(rays) or rays < 1:
         raise ValueError(f"rays must be an integer >= 1; got {rays!r}")
     if rng is None:
         rng = np.random.default_rng(0)
@@ -436,7 +425,7 @@ def exact_rows(patches, sources, *, rays=16, rng=None, bvh=None, source_order=1)
     """
     geo = _Geometry(patches, bvh)
     p = geo.n_patches
-    nodes = _check_sources(sources, 2 * p)
+    nodes = check_sources(sources, 2 * p)
     rays, rng = _check_common(rays, rng)
     order = _check_order(source_order)
     out = np.zeros((nodes.size, 2 * p))
@@ -456,7 +445,7 @@ def exact_rows(patches, sources, *, rays=16, rng=None, bvh=None, source_order=1)
 def _check_order(order):
     if isinstance(order, str) and order == "adaptive":
         return order
-    if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or order < 1:
+    if not is_int(order) or order < 1:
         raise ValueError(f"source_order must be an integer >= 1 or 'adaptive'; got {order!r}")
     return int(order)
 
@@ -531,14 +520,12 @@ def hybrid_rows(patches, sources, *, resolution=64, near=NEAR_DEFAULT, rays=16, 
     """
     geo = _Geometry(patches, bvh)
     p = geo.n_patches
-    nodes = _check_sources(sources, 2 * p)
+    nodes = check_sources(sources, 2 * p)
     rays, rng = _check_common(rays, rng)
     order = _check_order(source_order)
-    if isinstance(near, bool) or not isinstance(near, (int, float, np.integer, np.floating)) \
-            or not np.isfinite(near) or near < 0:
+    if not is_real(near) or near < 0:
         raise ValueError(f"near must be a finite number >= 0; got {near!r}")
-    if not isinstance(conserve, (bool, np.bool_)):
-        raise TypeError(f"conserve must be a bool; got {type(conserve).__name__}")
+    check_bool("conserve", conserve)
     rows = np.array(hemicube_rows(patches, nodes, resolution=resolution, rotate=rotate, rng=rng),
                     dtype=np.float64)
     hemi_total = rows.sum(axis=1)

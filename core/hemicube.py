@@ -21,6 +21,7 @@ from .constants import SURFACE_OFFSET
 from .hemicube_delta import FACE_NAMES, check_resolution, delta_form_factors  # noqa: F401
 from .hemicube_chunk import Geometry, Scene, rows_in_chunks
 from .patches import patch_triangles, triangle_mask
+from .validate import check_bool, check_sources, is_int
 
 #: A quad is drawn whole when its 4th corner lies within this fraction of its diagonal from the
 #: plane of the first three (else as two triangles): a 1e-6 warp moves its silhouette by far
@@ -63,26 +64,10 @@ def _check_frames(centres, normals, corners):
                          f"at patch {i}")
 
 
-def _check_sources(sources, n_nodes):
-    src = np.asarray(sources)
-    if src.ndim != 1:
-        raise ValueError(f"sources must be a 1-D array of node ids; got shape {src.shape}")
-    if src.size == 0:
-        return src.astype(np.int64)
-    if not np.issubdtype(src.dtype, np.integer):
-        raise TypeError(f"sources must hold integer node ids; got dtype {src.dtype}")
-    bad = (src < 0) | (src >= n_nodes)
-    if bad.any():
-        i = int(np.argmax(bad))
-        raise ValueError(f"sources must be node ids in [0, {n_nodes}) (2P); "
-                         f"got {int(src[i])} at index {i}")
-    return src.astype(np.int64)
-
-
 def _make_rng(rng):
     if isinstance(rng, np.random.Generator):
         return rng
-    if isinstance(rng, (int, np.integer)) and not isinstance(rng, (bool, np.bool_)):
+    if is_int(rng):
         return np.random.default_rng(int(rng))
     raise TypeError("rng must be a numpy.random.Generator (or an int seed) when rotate=True; "
                     f"got {type(rng).__name__}")
@@ -163,11 +148,9 @@ def polygon_rows(polys, poly_patch, centres, normals, corners, sources, *, resol
         raise ValueError("polys must be finite; got NaN or inf")
     if polys.shape[1] == 3:
         polys = polys[:, [0, 1, 2, 2]]
-    src = _check_sources(sources, 2 * n_patches)
-    if not isinstance(rotate, (bool, np.bool_)):
-        raise TypeError(f"rotate must be a bool; got {type(rotate).__name__}")
-    if not isinstance(cull_back, (bool, np.bool_)):
-        raise TypeError(f"cull_back must be a bool; got {type(cull_back).__name__}")
+    src = check_sources(sources, 2 * n_patches)
+    check_bool("rotate", rotate)
+    check_bool("cull_back", cull_back)
     angles = None
     if rotate:
         angles = _make_rng(rng).uniform(0.0, 2.0 * np.pi, size=src.size)
@@ -295,8 +278,7 @@ def point_rows(patches, points, normals, *, resolution=64, rotate=False, rng=Non
     if points.shape[0] and np.max(np.abs(length - 1.0)) > 1e-6:
         bad = int(np.argmax(np.abs(length - 1.0)))
         raise ValueError(f"normals must be unit vectors; normals[{bad}] has length {length[bad]:.6g}")
-    if not isinstance(rotate, (bool, np.bool_)):
-        raise TypeError(f"rotate must be a bool; got {type(rotate).__name__}")
+    check_bool("rotate", rotate)
     _, n_normals, _ = _patch_geometry(patches)
     n_patches = n_normals.shape[0]
     out = np.zeros((points.shape[0], 2 * n_patches))

@@ -16,29 +16,13 @@ in scene metres: the add-on converts them from Blender units with the scene's un
 import dataclasses
 from dataclasses import dataclass
 
-import numpy as np
-
 from .constants import (DEFAULT_CREASE_ANGLE, DEFAULT_MAX_ITERATIONS, DEFAULT_MEMORY_BUDGET,
                         DEFAULT_TOLERANCE, MAX_RESOLUTION)
 from .errors import SettingsError
+from .validate import is_bool, is_int, is_real
 
 #: Smallest memory_budget accepted (bytes): below this even a small room's rows do not fit.
 MIN_MEMORY_BUDGET = 1 << 20
-
-
-def is_int(value):
-    """True for Python and NumPy integers, not bools."""
-    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
-
-
-def is_real(value):
-    """True for finite Python and NumPy reals, not bools."""
-    return isinstance(value, (int, float, np.integer, np.floating)) and \
-        not isinstance(value, (bool, np.bool_)) and bool(np.isfinite(value))
-
-
-def is_bool(value):
-    return isinstance(value, (bool, np.bool_))
 
 
 @dataclass(frozen=True)

@@ -451,8 +451,10 @@ def test_sources_out_of_range(pat):
 
 
 def test_sources_must_be_integers(pat):
-    with pytest.raises(ValueError, match="sources must be a 1-D array of integer node ids"):
+    with pytest.raises(TypeError, match="sources must hold integer node ids; got dtype float64"):
         exact_rows(pat, [0.5])
+    with pytest.raises(ValueError, match="sources must be a 1-D array of integer node ids"):
+        exact_rows(pat, [[0]])
 
 
 def test_rays_must_be_positive(pat):
