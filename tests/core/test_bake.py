@@ -8,10 +8,11 @@ import time
 import numpy as np
 import pytest
 
+from bench.scenes import furnace_box, opposed_squares, room_with_boxes, unit_cube
+from conftest import horizontal_square
 from core import reciprocity, settings as settings_module
 from core.bake import BakeResult, BakeSettings, bake, form_factor_matrix, relight
 from core.errors import BakeCancelled, SettingsError
-from bench.scenes import furnace_box, opposed_squares, room_with_boxes, unit_cube
 from core.scene import scene_from_polygons
 from core.solvers import solve_direct
 
@@ -32,27 +33,13 @@ def _settings(**kw):
     return BakeSettings(**kw)
 
 
-def _square(z, size, n, down, x0=0.0):
-    """Vertices and quads of an n x n grid square at height z, normal -z if ``down``."""
-    t = np.linspace(0.0, size, n + 1)
-    xx, yy = np.meshgrid(t + x0, t + x0, indexing="ij")
-    verts = np.stack([xx.ravel(), yy.ravel(), np.full(xx.size, z)], axis=1)
-    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
-    quads = []
-    for i in range(n):
-        for j in range(n):
-            q = [idx[i, j], idx[i + 1, j], idx[i + 1, j + 1], idx[i, j + 1]]   # normal +z
-            quads.append(q[::-1] if down else q)
-    return verts, quads
-
-
 def _panel_under_ceiling(n=4, gap=1.0):
     """A ceiling square (normal down, grey) and an emitting panel ``gap`` below it facing down.
 
     Only the panel's back side faces the ceiling.
     """
-    v1, q1 = _square(gap, 1.0, n, down=True)
-    v2, q2 = _square(0.0, 1.0, n, down=True)
+    v1, q1 = horizontal_square(gap, 1.0, n, down=True)
+    v2, q2 = horizontal_square(0.0, 1.0, n, down=True)
     verts = np.vstack([v1, v2])
     quads = q1 + [[i + len(v1) for i in q] for q in q2]
     mats = [0] * len(q1) + [1] * len(q2)
@@ -170,8 +157,8 @@ def test_energy_balance_one_sided_black_backs():
     # square's lit side is its black back. Sender-based closed forms with f = F(emitter ->
     # square's back node): absorbed = pi A Le f, escaped = pi A Le (1 - f), balance 0 without
     # any reciprocity assumption; the square is reported as lit from behind.
-    v1, q1 = _square(1.0, 1.0, 1, down=True)
-    v2, q2 = _square(0.0, 1.0, 1, down=True)
+    v1, q1 = horizontal_square(1.0, 1.0, 1, down=True)
+    v2, q2 = horizontal_square(0.0, 1.0, 1, down=True)
     scene = scene_from_polygons(np.vstack([v1, v2]), q1 + [[i + 4 for i in q2[0]]], [0, 1],
                                 [[0.0] * 3, [0.5] * 3], [[2.0] * 3, [0.0] * 3])
     res = bake(scene, _settings(patch_size=1.0, rotate_hemicube=False, two_sided=False))
