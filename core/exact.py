@@ -27,16 +27,12 @@ i.e. ~50x a R = 64 hemicube row; source_order="adaptive" adds ~60% on a room.
 
 import numpy as np
 
-from .constants import SURFACE_OFFSET
+from .constants import tol
 from .hemicube import hemicube_rows
 from .raycast import BVH, build_bvh, closest_hit
 from .settings import BY_NAME
 from .validate import check_bool, check_sources, is_int, is_real
 
-#: A polygon whose highest corner is below this fraction of its distance from the point, measured
-#: along the point's normal, lies in the point's tangent plane (or under it): F = 0. Without this,
-#: a coplanar polygon around the point would give the horizon's full winding (F = 1).
-COPLANAR_TOL = 1e-12
 
 #: Hybrid default: a pair is "near" when its centre distance is below NEAR_DEFAULT times the larger
 #: patch size (sqrt of area); the bake's ``near`` setting (core.settings), one default for both.
@@ -56,10 +52,6 @@ NEAR_DEFAULT = BY_NAME["near"].default
 ADAPTIVE_ORDERS = (4, 8, 16, 32)
 ADAPTIVE_TOL = 1e-3
 
-#: Visibility rays count as unoccluded if their closest hit is at least this close (as a fraction
-#: of the segment) to the target point: the target itself may be reported as a coplanar neighbour
-#: hit at the same distance.
-VIS_EPS = 1e-7
 
 #: (source, target) pairs handled at once; bounds the pair arrays to a few tens of MB.
 PAIR_CHUNK = 4096
@@ -111,12 +103,12 @@ def _pair_form_factor(x, n, polys):
     r = polys - x[:, None, :]
     h = np.einsum("mkj,mj->mk", r, n)
     reach = np.sqrt(np.einsum("mkj,mkj->mk", r, r)).max(axis=1)
-    above = h.max(axis=1) > COPLANAR_TOL * reach
+    above = h.max(axis=1) > tol.coplanar * reach
     # A point in the polygon's own plane sees it edge-on: F = 0. (On its boundary the contour
     # sum would otherwise give a partial winding angle, e.g. 0.088 at a wall's corner.)
     area_vec = np.cross(r, np.roll(r, -1, axis=1)).sum(axis=1)        # Newell: 2 x area x normal
     edge_on = np.abs(np.einsum("mj,mj->m", area_vec, r.mean(axis=1))) <= \
-        COPLANAR_TOL * reach * np.sqrt(np.einsum("mj,mj->m", area_vec, area_vec))
+        tol.coplanar * reach * np.sqrt(np.einsum("mj,mj->m", area_vec, area_vec))
     poly, count = _clip_halfspace(r, h)
     a, b = poly, np.roll(poly, -1, axis=1)
     c = np.cross(a, b)
@@ -265,7 +257,7 @@ class _Geometry:
                              f"triangles); got one over {bvh.n_triangles} other triangles")
         self.bvh = bvh
         lo, hi = self.corners.min(axis=(0, 1)), self.corners.max(axis=(0, 1))
-        self.offset = SURFACE_OFFSET * max(float(np.linalg.norm(hi - lo)), 1e-300)
+        self.offset = tol.surface_offset * max(float(np.linalg.norm(hi - lo)), 1e-300)
 
     def node_frames(self, nodes):
         patch = nodes % self.n_patches
@@ -350,7 +342,7 @@ def _pair_values(geo, nodes, targets, rays, rng, order):
     # A target wholly in or under the source's plane is invisible from every source point.
     h = np.einsum("mkj,mj->mk", geo.corners[targets] - geo.centres[patch][:, None, :], n)
     reach = np.abs(geo.corners[targets] - geo.centres[patch][:, None, :]).max(axis=(1, 2))
-    live = np.flatnonzero(h.max(axis=1) > COPLANAR_TOL * reach)
+    live = np.flatnonzero(h.max(axis=1) > tol.coplanar * reach)
     if order == "adaptive":
         f, b = _adaptive_average(geo, patch[live], n[live], targets[live])
     else:
@@ -387,10 +379,10 @@ def _visible_fraction(geo, src, n, tgt, rays, rng, area_source):
     # Pairs whose kernel vanishes at every sample (a sliver above the horizon) fall back to area.
     flat = w.sum(axis=1) <= 0.0
     w[flat] = jac[flat]
-    t, tri = closest_hit(geo.bvh, origin.reshape(-1, 3), d.reshape(-1, 3), 1.0 + VIS_EPS)
+    t, tri = closest_hit(geo.bvh, origin.reshape(-1, 3), d.reshape(-1, 3), 1.0 + tol.visibility)
     tri = tri.reshape(m, rays)
     hit_patch = np.where(tri >= 0, geo.tri_patch[np.maximum(tri, 0)], -1)
-    clear = (tri < 0) | (hit_patch == tgt[:, None]) | (t.reshape(m, rays) >= 1.0 - VIS_EPS)
+    clear = (tri < 0) | (hit_patch == tgt[:, None]) | (t.reshape(m, rays) >= 1.0 - tol.visibility)
     total = w.sum(axis=1)
     return np.divide((w * clear).sum(axis=1), total, out=np.ones(m), where=total > 0.0)
 

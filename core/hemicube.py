@@ -17,16 +17,12 @@ import weakref
 
 import numpy as np
 
-from .constants import SURFACE_OFFSET
+from .constants import tol
 from .hemicube_delta import FACE_NAMES, check_resolution, delta_form_factors  # noqa: F401
 from .hemicube_chunk import Geometry, Scene, rows_in_chunks
 from .patches import patch_triangles, triangle_mask
 from .validate import check_bool, check_sources, is_int
 
-#: A quad is drawn whole when its 4th corner lies within this fraction of its diagonal from the
-#: plane of the first three (else as two triangles): a 1e-6 warp moves its silhouette by far
-#: less than a pixel at any resolution allowed.
-_PLANAR_TOLERANCE = 1e-6
 
 
 def _patch_geometry(patches):
@@ -82,7 +78,7 @@ def _eye_frames(centres, normals, corners, sources, n_patches, diag, angles):
     patch = sources % n_patches
     sign = np.where(sources >= n_patches, -1.0, 1.0)[:, None]
     z = normals[patch] * sign
-    eyes = centres[patch] + (SURFACE_OFFSET * diag) * z
+    eyes = centres[patch] + (tol.surface_offset * diag) * z
     edge = corners[patch, 1] - corners[patch, 0]
     x = edge - np.sum(edge * z, axis=1, keepdims=True) * z
     norm = np.linalg.norm(x, axis=1)
@@ -185,7 +181,7 @@ def draw_polygons(patches):
     edges = np.roll(corners, -1, axis=1) - corners
     turns = np.einsum("qkj,qj->qk", np.cross(edges, np.roll(edges, -1, axis=1)), n)
     is_quad = ~triangle_mask(corners)
-    whole = is_quad & (length > 0) & (off_plane <= _PLANAR_TOLERANCE * diagonal) \
+    whole = is_quad & (length > 0) & (off_plane <= tol.planar * diagonal) \
         & np.all(turns > 0, axis=1)
     rest = np.flatnonzero(~whole)
     tris, tri_local = patch_triangles(_Corners(corners[rest]))
@@ -211,7 +207,7 @@ def hemicube_rows(patches, sources, *, resolution=64, rotate=False, rng=None, cu
         non-planar or concave quads are drawn as :func:`core.patches.patch_triangles`).
     sources : (S,) int
         Node ids in [0, 2P): node p looks along the normal of patch p, node p + P along its
-        opposite, both from the patch centre (offset by ``SURFACE_OFFSET`` x scene diagonal
+        opposite, both from the patch centre (offset by ``tol.surface_offset`` x scene diagonal
         along the viewing direction so that coplanar neighbours are not seen).
     resolution : int, optional
         R, even, 2 <= R <= 2048 (top face R x R, sides R x R/2). Error falls as 1/R^2 for
@@ -254,7 +250,7 @@ def point_rows(patches, points, normals, *, resolution=64, rotate=False, rng=Non
     patches : core.patches.Patches
         The scene's patches (``P``); columns are nodes ``q`` (front) and ``q + P`` (back).
     points : (S, 3) float
-        Eye points. Each is moved ``SURFACE_OFFSET`` x scene diagonal along its normal, so the
+        Eye points. Each is moved ``tol.surface_offset`` x scene diagonal along its normal, so the
         surface it lies on is not seen.
     normals : (S, 3) float
         Unit viewing normals.
@@ -296,7 +292,7 @@ def point_rows(patches, points, normals, *, resolution=64, rotate=False, rng=Non
         c, s_ = np.cos(ang)[:, None], np.sin(ang)[:, None]
         x, y = c * x + s_ * y, c * y - s_ * x
     frames = np.stack([x, y, z], axis=1)
-    eyes = points + (SURFACE_OFFSET * sc.diag) * z
+    eyes = points + (tol.surface_offset * sc.diag) * z
     rows_in_chunks(sc, eyes, frames, out, None)
     return out
 

@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from .constants import HEMICUBE_NEAR
+from .constants import tol
 from .hemicube_delta import flat_delta_form_factors
 from .hemicube_raster import F32, FRAG_SLOTS, LITTLE_ENDIAN, ZBuffer, draw_items, pixel_coords
 
@@ -56,7 +56,7 @@ class Scene:
         self.verts_t = np.ascontiguousarray(g.verts.T)                     # (3, U)
         self.plane_n_t = np.ascontiguousarray(g.plane_n.T)                 # (3, Q)
         self.plane_c, self.diag = g.plane_c, g.diag
-        self.near = HEMICUBE_NEAR * g.diag
+        self.near = tol.hemicube_near * g.diag
         self.n_patches = n_patches
         self.r = resolution
         self.npix = 3 * resolution * resolution

@@ -28,14 +28,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .constants import tol
 from .errors import SettingsError
 from .geometry import (newell_normals_areas, quads_convex, ragged as _ragged,
                        split_concave_quads, triangulate_polygon)
 
-#: Relative slack in ``ceil(length / max_edge)``: an edge whose length is a whole multiple of
-#: ``max_edge`` up to float64 rounding (0.3 / 0.1 = 2.9999999999999996, 1.2 / 0.4 = 3.0000000000000004)
-#: gets that multiple, not one segment more. Segments may thus exceed max_edge by 1e-9 relative.
-EDGE_COUNT_SLACK = 1e-9
 
 #: Largest patch count make_patches builds; beyond it a too small max_edge would exhaust memory
 #: (about 0.5 kB per patch with the temporaries) long before a solve could finish.
@@ -187,7 +184,7 @@ def make_patches(scene, max_edge):
         With ``F`` faces; faces with ``face_valid`` False make no patches.
     max_edge : float
         Longest allowed patch edge, scene metres (> 0). Edges that are a whole multiple of it
-        may exceed it by ``EDGE_COUNT_SLACK`` relative (float64 rounding).
+        may exceed it by ``tol.edge_count`` relative (float64 rounding).
 
     Returns
     -------
@@ -230,7 +227,7 @@ def make_patches(scene, max_edge):
     # the short edge stays coarse (needles do not explode) and ties do not flood triangle meshes.
     tri_pts = vertices[corner_verts[tri_loops]]
     tri_len = np.linalg.norm(np.roll(tri_pts, -1, axis=1) - tri_pts, axis=2)
-    tri_own = np.maximum(np.ceil(tri_len / h * (1.0 - EDGE_COUNT_SLACK)), 1.0)
+    tri_own = np.maximum(np.ceil(tri_len / h * (1.0 - tol.edge_count)), 1.0)
     fan = tri_own.min(axis=1) < tri_own.max(axis=1)
     k = np.argmin(tri_len[fan], axis=1)
     fan_loops = np.take_along_axis(tri_loops[fan], (k[:, None] + np.array([0, 1, 2, 2])) % 3, axis=1)
@@ -254,7 +251,7 @@ def make_patches(scene, max_edge):
     t_edges = edge_of[4 * n_q:].reshape(-1, 3)
 
     length = np.linalg.norm(weld_points[edge_hi] - weld_points[edge_lo], axis=1)
-    own = np.maximum(np.ceil(length / h * (1.0 - EDGE_COUNT_SLACK)), 1.0)
+    own = np.maximum(np.ceil(length / h * (1.0 - tol.edge_count)), 1.0)
     # Ties: opposite edges of a quad (not the collapsed edge C-C of a fan), all edges of a triangle.
     links_a = np.concatenate([q_edges[~collapsed, 0], q_edges[:, 1], t_edges[:, 0], t_edges[:, 1]])
     links_b = np.concatenate([q_edges[~collapsed, 2], q_edges[:, 3], t_edges[:, 1], t_edges[:, 2]])

@@ -10,7 +10,8 @@ import pytest
 
 from core import BakeSettings, bake
 from core.bake import make_reciprocal
-from core.contacts import CONTACT_TOL, find_contacts, split_at_contacts
+from core.constants import tol
+from core.contacts import find_contacts, split_at_contacts
 from core.errors import SettingsError
 from core.patches import make_patches
 from bench.scenes import _Builder
@@ -169,8 +170,8 @@ def test_a_corner_on_the_outline_takes_the_light_of_its_own_side():
 
 def test_contact_tolerance_and_parallel_faces():
     # A box floating 1 cm above the floor touches nothing (no cut); one within the contact
-    # distance (CONTACT_TOL of the bounding diagonal) does.
-    for lift, expect in ((0.01, False), (0.2 * CONTACT_TOL, True)):
+    # distance (tol.contact of the bounding diagonal) does.
+    for lift, expect in ((0.01, False), (0.2 * tol.contact, True)):
         scene = _room(ROTATED, walls=False)
         verts = scene.vertices.copy()
         box = scene.face_objects[np.repeat(np.arange(scene.n_faces), scene.face_sizes)] == 1

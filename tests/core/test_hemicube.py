@@ -465,15 +465,15 @@ def test_wall_crossing_or_touching_the_eye_plane_is_clipped(resolution, bottom):
 
 
 def test_geometry_nearer_than_the_near_plane_is_clipped():
-    # HEMICUBE_NEAR: along each face's axis, geometry nearer than near = HEMICUBE_NEAR x scene
-    # diagonal is cut away. A wall x = near / 3 beside the eye is then invisible through the
+    # Along each face's axis, geometry nearer than near = tol.hemicube_near x scene diagonal is
+    # cut away. A wall x = near / 3 beside the eye is then invisible through the
     # +x face (all of it is nearer than near along x). Through the top face (axis z) the ray
     # of column u meets it at z = x / u, kept while z >= near: 0 < u <= 1/3; through the
     # +y face (axis y, u = -x / y) at y = -x / u: -1/3 <= u < 0; the -y face mirrors it.
-    from core.constants import HEMICUBE_NEAR
+    from core.constants import tol
     source = square(0, 0, 0, 0.01)
     diagonal = np.linalg.norm([0.01, 2.0, 2.0])                 # bounding box of the scene
-    wall_x = HEMICUBE_NEAR * diagonal / 3                       # inside the source's x extent
+    wall_x = tol.hemicube_near * diagonal / 3                       # inside the source's x extent
     wall = np.array([[wall_x, -1, -1], [wall_x, 1, -1], [wall_x, 1, 1], [wall_x, -1, 1]])[::-1]
     patches = make_patches([source, wall])
     rows = hemicube_rows(patches, [0], resolution=64)[0]

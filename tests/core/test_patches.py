@@ -10,7 +10,7 @@ from core.patches import make_patches, patch_triangles, subdivide_patches
 
 #: Float64 rounding in sums of up to ~1e4 patch areas of O(1) size: 1e-12 relative leaves room.
 AREA_RTOL = 1e-12
-#: make_patches rounds ceil(length / max_edge) with 1e-9 relative slack (EDGE_COUNT_SLACK).
+#: make_patches rounds ceil(length / max_edge) with 1e-9 relative slack (tol.edge_count).
 EDGE_RTOL = 1e-9
 #: Distance (m) under which a point counts as lying on a segment: rounding of O(1) coordinates.
 ON_SEGMENT = 1e-12

@@ -47,7 +47,7 @@ def test_closest_hit_matches_brute_force(n_tri, seed):
     bvh = build_bvh(tris)
     t, tri = closest_hit(bvh, o, d, t_max)
     tb, trib = brute_force(tris, o, d, t_max)
-    # Random rays almost never graze an edge, where the slack BARY_EPS could matter: the
+    # Random rays almost never graze an edge, where the slack tol.barycentric could matter: the
     # winning triangle must agree exactly, t to rounding (same formula, different operand order).
     assert np.array_equal(tri, trib)
     np.testing.assert_allclose(t, tb, rtol=1e-12)
