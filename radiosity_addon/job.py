@@ -45,9 +45,10 @@ class BakeInput:
 def options_from_props(props):
     """Bake options (dict) from the scene's RadiositySettings property group.
 
-    Lengths are used as they are, in metres (like every length of the core's settings).
+    Lengths are converted to metres with the scene's unit scale (the core works in metres).
     """
-    return {row.name: from_blender(row, getattr(props, row.name)) for row in OPTIONS}
+    scale = float(props.id_data.unit_settings.scale_length) or 1.0
+    return {row.name: from_blender(row, getattr(props, row.name), scale) for row in OPTIONS}
 
 
 def prepare(context, options):

@@ -28,9 +28,18 @@ def enum_items(row):
     return [(c.value.upper(), c.label, c.help) for c in row.choices]
 
 
-def from_blender(row, value):
-    """A property's value as the core expects it (enum identifiers back to lower case)."""
-    return value.lower() if row.type == "choice" else value
+def from_blender(row, value, unit_scale=1.0):
+    """A property's value as the core expects it.
+
+    Enum identifiers go back to lower case; lengths (``row.is_length``) from Blender units to
+    metres with the scene's unit scale, as the scene's coordinates are (extract.py): the panel
+    shows a length times the unit scale, so what it shows is what the bake uses.
+    """
+    if row.type == "choice":
+        return value.lower()
+    if row.is_length:
+        return value * unit_scale
+    return value
 
 
 def _make_even(name):

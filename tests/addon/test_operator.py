@@ -418,11 +418,16 @@ def test_disk_light_polygon_keeps_area_and_faces_down(package):
 
 
 def test_unit_scale_sets_patch_size_in_metres(package):
+    # Lengths in the panel are in scene units, shown (and baked) times the unit scale: with
+    # 1 unit = 2 m, the faces are 2 m across and a patch size of 0.5 units is 1 m.
     v, f = box(1.0)
     mesh_object("Furnace", v, f, material("m", (0.5,) * 3, emission=(1, 1, 1)))
     assert bake_ok(patch_size=0.5, resolution=8)["patches"] == 6 * 4
-    bpy.context.scene.unit_settings.scale_length = 2.0  # 1 unit = 2 m: faces 2 m across
-    assert bake_ok()["patches"] == 6 * 16
+    bpy.context.scene.unit_settings.scale_length = 2.0
+    report = bake_ok()
+    assert report["patches"] == 6 * 4
+    assert report["settings"]["patch_size"] == pytest.approx(1.0)
+    assert bake_ok(patch_size=0.25)["patches"] == 6 * 16
 
 
 def test_image_texture_colour_is_averaged_and_reported(package):
