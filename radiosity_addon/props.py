@@ -9,6 +9,7 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
 from ..core.settings import BY_NAME, EXPOSED, Setting
+from .write import show_in_viewports
 
 #: Options of the add-on itself (not core.BakeSettings), declared like the core's settings.
 ADDON_OPTIONS = (
@@ -76,8 +77,6 @@ def make_property(row):
 
 
 def _show_bake_changed(self, context):
-    from .write import show_in_viewports
-
     wm = context.window_manager
     if wm is not None:
         show_in_viewports([w.screen for w in wm.windows], self.show_bake)

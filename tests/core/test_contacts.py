@@ -8,13 +8,14 @@ path tracer reads exactly 0 there (tests/compare shows Cycles does).
 import numpy as np
 import pytest
 
+from bench.scenes import _Builder
 from core import BakeSettings, bake
 from core.bake import make_reciprocal
 from core.constants import tol
 from core.contacts import find_contacts, split_at_contacts
 from core.errors import SettingsError
 from core.patches import make_patches
-from bench.scenes import _Builder
+from core.scene import make_scene
 
 FLOOR, BOX, WALL, LAMP = 0, 1, 2, 3
 
@@ -177,7 +178,6 @@ def test_contact_tolerance_and_parallel_faces():
         box = scene.face_objects[np.repeat(np.arange(scene.n_faces), scene.face_sizes)] == 1
         vb = np.unique(scene.corner_verts[box])
         verts[vb, 2] += lift
-        from core.scene import make_scene
         moved = make_scene(verts, scene.corner_verts, scene.face_starts, scene.face_sizes,
                            scene.face_materials, scene.reflectance, scene.emission,
                            face_objects=scene.face_objects, object_names=scene.object_names)
@@ -192,7 +192,6 @@ def test_a_box_sunk_into_the_floor_cuts_along_its_section():
     face_of = np.repeat(np.arange(scene.n_faces), scene.face_sizes)
     vb = np.unique(scene.corner_verts[scene.face_objects[face_of] == 1])
     verts[vb, 2] -= 0.05
-    from core.scene import make_scene
     sunk = make_scene(verts, scene.corner_verts, scene.face_starts, scene.face_sizes,
                       scene.face_materials, scene.reflectance, scene.emission,
                       face_objects=scene.face_objects, object_names=scene.object_names)

@@ -6,14 +6,18 @@ rows sum to 1, reciprocity) and geometric constructions whose visible parts are 
 Scenes are built here from explicit quads; ``patch_triangles`` splits them as the bake does.
 """
 
+from concurrent.futures import ThreadPoolExecutor
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+from bench import scenes as samples
 from core import hemicube, hemicube_chunk, hemicube_raster
+from core.constants import tol
 from core.hemicube import (FACE_NAMES, delta_form_factors, draw_polygons, hemicube_rows,
                            polygon_rows)
+from core.patches import patch_triangles
 
 #: Howell's catalogue (shared/reference/form_factors.md).
 CUBE_OPPOSITE = 0.199824895698
@@ -470,7 +474,6 @@ def test_geometry_nearer_than_the_near_plane_is_clipped():
     # +x face (all of it is nearer than near along x). Through the top face (axis z) the ray
     # of column u meets it at z = x / u, kept while z >= near: 0 < u <= 1/3; through the
     # +y face (axis y, u = -x / y) at y = -x / u: -1/3 <= u < 0; the -y face mirrors it.
-    from core.constants import tol
     source = square(0, 0, 0, 0.01)
     diagonal = np.linalg.norm([0.01, 2.0, 2.0])                 # bounding box of the scene
     wall_x = tol.hemicube_near * diagonal / 3                       # inside the source's x extent
@@ -554,7 +557,6 @@ def test_quads_whole_cover_the_same_pixels_as_their_triangles():
     # With rotated hemicubes no pixel centre lies exactly on a box edge, so drawing a planar
     # quad whole or as two triangles must give the same rows, but for the odd pixel whose
     # centre ties two polygons at equal depth (at most a few pixels' delta form factor).
-    from core.patches import patch_triangles
     corners, _ = box_quads((1.0, 1.5, 2.0), 0.25)
     patches = make_patches(corners)
     p = len(corners)
@@ -576,7 +578,6 @@ def test_quads_whole_cover_the_same_pixels_as_their_triangles():
 def test_setup_cache_follows_the_patches_object():
     # hemicube_rows caches the per-scene setup of the last Patches object: alternating between
     # two scenes must give each its own rows, equal to an uncached computation.
-    from bench import scenes as samples
     patches_mod = pytest.importorskip("core.patches")
     cube = patches_mod.make_patches(samples.unit_cube(n=2), max_edge=0.5)
     squares = patches_mod.make_patches(samples.opposed_squares(n=2), max_edge=0.5)
@@ -591,7 +592,6 @@ def test_setup_cache_follows_the_patches_object():
 
 
 def test_with_real_patches_of_a_sample_scene():
-    from bench import scenes as samples
     patches_mod = pytest.importorskip("core.patches")
     scene = samples.unit_cube(n=3)
     patches = patches_mod.make_patches(scene, max_edge=0.5)
@@ -656,7 +656,6 @@ def test_kept_buffers_do_not_leak_between_calls_or_threads():
     # The z-buffer and the tiled delta form factors are kept per thread and reused: calls of
     # other sizes and resolutions in between, or in other threads at the same time, must not
     # change a result.
-    from concurrent.futures import ThreadPoolExecutor
 
     patches = _room_with_furniture()
     p = patches.centres.shape[0]

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from core.raycast import BVH, LEAF_SIZE, any_hit, build_bvh, closest_hit
+import core.raycast as rc
 
 
 def brute_force(tris, o, d, t_max):
@@ -131,7 +132,6 @@ def test_parallel_axis_rays_with_zero_direction_components():
 
 
 def test_many_rays_cross_chunk_boundaries(monkeypatch):
-    import core.raycast as rc
     monkeypatch.setattr(rc, "RAY_CHUNK", 97)
     rng = np.random.default_rng(5)
     tris = random_scene(rng, 300)
