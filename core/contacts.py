@@ -26,7 +26,7 @@ import numpy as np
 
 from . import constants
 from .geometry import newell_normals_areas, ragged
-from .patches import Patches, _assemble, _material_table, triangle_mask
+from .patches import Patches, assemble_patches, material_table, triangle_mask
 
 
 
@@ -449,5 +449,5 @@ def split_at_contacts(scene, patches, contacts=None, *, tol=None):
         corners = new_corners
     info["added"] = int(corners.shape[0] - P0)
     n_faces = patches.face_patch_start.shape[0] - 1
-    new = _assemble(corners, face, _material_table(patches), n_faces, inc_v, inc_p, inc_c, inc_s)
+    new = assemble_patches(corners, face, material_table(patches), n_faces, inc_v, inc_p, inc_c, inc_s)
     return new, parent, info

@@ -33,7 +33,6 @@ from .errors import SettingsError
 from .geometry import (newell_normals_areas, quads_convex, ragged as _ragged,
                        split_concave_quads, triangulate_polygon)
 
-
 #: Largest patch count make_patches builds; beyond it a too small max_edge would exhaust memory
 #: (about 0.5 kB per patch with the temporaries) long before a solve could finish.
 MAX_PATCHES = 5_000_000
@@ -106,7 +105,7 @@ def _check_max_edge(max_edge):
     return h
 
 
-def _check_scene(scene):
+def check_scene(scene):
     needed = ("vertices", "corner_verts", "face_starts", "face_sizes", "face_materials",
               "face_normals", "face_valid")
     missing = [name for name in needed if not hasattr(scene, name)]
@@ -204,7 +203,7 @@ def make_patches(scene, max_edge):
     2294 / 17694 (at 0.5 m every input quad already is one patch).
     """
     h = _check_max_edge(max_edge)
-    _check_scene(scene)
+    check_scene(scene)
     vertices = np.asarray(scene.vertices, dtype=np.float64)
     corner_verts = np.asarray(scene.corner_verts, dtype=np.int64)
     face_starts = np.asarray(scene.face_starts, dtype=np.int64)
@@ -283,7 +282,7 @@ def make_patches(scene, max_edge):
     order = np.argsort(elem_face, kind="stable")
     rank = np.empty_like(order)
     rank[order] = np.arange(order.shape[0])
-    return _assemble(corners[order], elem_face[order], np.asarray(scene.face_materials, np.int64),
+    return assemble_patches(corners[order], elem_face[order], np.asarray(scene.face_materials, np.int64),
                      n_faces, corner_verts[inc_loop], rank[inc_patch], inc_loop, inc_slot)
 
 
@@ -480,7 +479,9 @@ def _centroids(corners, normals):
     return np.where(ok[:, None], centre, corners.mean(axis=1))
 
 
-def _assemble(corners, face, face_materials, n_faces, inc_vertex, inc_patch, inc_loop, inc_slot):
+def assemble_patches(corners, face, face_materials, n_faces, inc_vertex, inc_patch, inc_loop,
+                     inc_slot):
+    """A :class:`Patches` from its corners and incidence arrays (also used by core.contacts)."""
     normals, areas = newell_normals_areas(corners)
     centres = _centroids(corners, normals)
     counts = np.bincount(face, minlength=n_faces)
@@ -585,13 +586,13 @@ def subdivide_patches(patches, mask):
     inc_p = patches.incidence_patch
     new_inc = child_start[inc_p] + np.where(mask[inc_p], patches.incidence_slot, 0)
     n_faces = patches.face_patch_start.shape[0] - 1
-    new = _assemble(new_corners, patches.face[parent], _material_table(patches), n_faces,
+    new = assemble_patches(new_corners, patches.face[parent], material_table(patches), n_faces,
                     patches.incidence_vertex, new_inc, patches.incidence_corner,
                     patches.incidence_slot)
     return new, parent.astype(np.int64)
 
 
-def _material_table(patches):
+def material_table(patches):
     """A face -> material table that reproduces ``patches.material`` (faces without patches: 0)."""
     n_faces = patches.face_patch_start.shape[0] - 1
     table = np.zeros(n_faces, dtype=np.int64)
