@@ -35,6 +35,7 @@ def asymmetry(F, areas, monitor=None):
     for s in range(0, F.shape[0], _BLOCK):
         e = min(s + _BLOCK, F.shape[0])
         g = areas[s:e, None] * F[s:e].astype(np.float64)
+        poll(monitor, "making form factors reciprocal")
         gt = F[:, s:e].T.astype(np.float64) * areas[None, :]
         num += float(np.abs(g - gt).sum())
         den += float(g.sum())
