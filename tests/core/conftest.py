@@ -1,5 +1,7 @@
 """Scene builders shared by the core tests (import them: ``from conftest import grid``)."""
 
+from types import SimpleNamespace
+
 import numpy as np
 
 
@@ -26,3 +28,46 @@ def grid(origin, a, b, n, *, flip=False):
 def horizontal_square(z, size, n, *, down=False, x0=0.0):
     """``grid`` of the square [x0, x0 + size]^2 at height z, normal +z (-z if ``down``)."""
     return grid((x0, x0, z), (size, 0, 0), (0, size, 0), n, flip=down)
+
+
+def quad_patches(corners):
+    """A Patches-like object from (P, 4, 3) corners (a triangle repeats its last corner)."""
+    corners = np.asarray(corners, dtype=float)
+    v = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]) \
+        + np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 0])
+    length = np.linalg.norm(v, axis=1)
+    return SimpleNamespace(corners=corners, centres=corners.mean(axis=1),
+                           normals=v / length[:, None], areas=0.5 * length)
+
+
+def centred_square(cx, cy, z, size, facing_up=True):
+    """Axis-aligned square in the plane z, normal +z (or -z)."""
+    s = 0.5 * size
+    c = np.array([[cx - s, cy - s, z], [cx + s, cy - s, z], [cx + s, cy + s, z],
+                  [cx - s, cy + s, z]])
+    return c if facing_up else c[::-1]
+
+
+def box_quads(dims, cell):
+    """Closed box [0, dims], inward normals, conforming grid of about ``cell`` metres.
+
+    Returns corners (P, 4, 3) and the box face (0..5: x=0, x=max, y=0, y=max, z=0, z=max).
+    """
+    quads, face = [], []
+    for axis in range(3):
+        a, b = [k for k in range(3) if k != axis]
+        ga = np.linspace(0, dims[a], int(round(dims[a] / cell)) + 1)
+        gb = np.linspace(0, dims[b], int(round(dims[b] / cell)) + 1)
+        for side in (0, 1):
+            for i in range(ga.size - 1):
+                for j in range(gb.size - 1):
+                    q = np.zeros((4, 3))
+                    q[:, axis] = side * dims[axis]
+                    q[:, a] = [ga[i], ga[i + 1], ga[i + 1], ga[i]]
+                    q[:, b] = [gb[j], gb[j], gb[j + 1], gb[j + 1]]
+                    inward = 1 if side == 0 else -1
+                    if np.cross(q[1] - q[0], q[2] - q[0])[axis] * inward < 0:
+                        q = q[::-1]
+                    quads.append(q)
+                    face.append(2 * axis + side)
+    return np.array(quads), np.array(face)

@@ -6,18 +6,18 @@ rows sum to 1, reciprocity) and geometric constructions whose visible parts are 
 Scenes are built here from explicit quads; ``patch_triangles`` splits them as the bake does.
 """
 
-from concurrent.futures import ThreadPoolExecutor
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from bench import scenes as samples
-from core import hemicube, hemicube_chunk, hemicube_raster
 from core.constants import tol
 from core.hemicube import (FACE_NAMES, delta_form_factors, draw_polygons, hemicube_rows,
                            polygon_rows)
 from core.patches import patch_triangles
+
+from conftest import box_quads, centred_square as square, quad_patches as make_patches
 
 #: Howell's catalogue (shared/reference/form_factors.md).
 CUBE_OPPOSITE = 0.199824895698
@@ -29,49 +29,6 @@ SIDE_SHARE = 0.1114683940
 # ------------------------------------------------------------------------------------------
 # Scene helpers and the independent oracle
 # ------------------------------------------------------------------------------------------
-
-def make_patches(corners):
-    """A Patches-like object from (P, 4, 3) corners (a triangle repeats its last corner)."""
-    corners = np.asarray(corners, dtype=float)
-    v = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]) \
-        + np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 0])
-    length = np.linalg.norm(v, axis=1)
-    return SimpleNamespace(corners=corners, centres=corners.mean(axis=1),
-                           normals=v / length[:, None], areas=0.5 * length)
-
-
-def square(cx, cy, z, size, facing_up=True):
-    """Axis-aligned square in the plane z, normal +z (or -z)."""
-    s = 0.5 * size
-    c = np.array([[cx - s, cy - s, z], [cx + s, cy - s, z], [cx + s, cy + s, z],
-                  [cx - s, cy + s, z]])
-    return c if facing_up else c[::-1]
-
-
-def box_quads(dims, cell):
-    """Closed box [0, dims], inward normals, conforming grid of about ``cell`` metres.
-
-    Returns corners (P, 4, 3) and the box face (0..5: x=0, x=max, y=0, y=max, z=0, z=max).
-    """
-    quads, face = [], []
-    for axis in range(3):
-        a, b = [k for k in range(3) if k != axis]
-        ga = np.linspace(0, dims[a], int(round(dims[a] / cell)) + 1)
-        gb = np.linspace(0, dims[b], int(round(dims[b] / cell)) + 1)
-        for side in (0, 1):
-            for i in range(ga.size - 1):
-                for j in range(gb.size - 1):
-                    q = np.zeros((4, 3))
-                    q[:, axis] = side * dims[axis]
-                    q[:, a] = [ga[i], ga[i + 1], ga[i + 1], ga[i]]
-                    q[:, b] = [gb[j], gb[j], gb[j + 1], gb[j + 1]]
-                    inward = 1 if side == 0 else -1
-                    if np.cross(q[1] - q[0], q[2] - q[0])[axis] * inward < 0:
-                        q = q[::-1]
-                    quads.append(q)
-                    face.append(2 * axis + side)
-    return np.array(quads), np.array(face)
-
 
 def clip_to_hemisphere(poly, point, normal):
     """Sutherland-Hodgman clip of a polygon (K, 3) to the half-space above a point's plane."""
@@ -600,73 +557,3 @@ def test_with_real_patches_of_a_sample_scene():
     # Inward-facing closed cube: front nodes see everything, back nodes (outside) nothing.
     assert np.allclose(rows[:p].sum(axis=1), 1.0, atol=1e-12)
     assert rows[p:].sum() == 0
-
-
-def test_rows_do_not_depend_on_how_fragments_are_blocked(monkeypatch):
-    # Spans are drawn in blocks, _FRAG_SLOTS pixels per span at once (slots past a span get
-    # a negative key) and the rest of longer spans in a second pass. Blocks of 3 spans put
-    # block edges everywhere; the rows must be bit-identical, and closed-box rows still sum
-    # to 1 (a padding slot that wrote a pixel, or a lost fragment, would break one of both).
-    corners, _ = box_quads((1.0, 1.0, 1.0), 0.25)
-    patches = make_patches(corners)
-    sources = np.arange(0, corners.shape[0], 7)
-    whole = hemicube_rows(patches, sources, resolution=32, rotate=True, rng=2)
-    monkeypatch.setattr(hemicube_raster, "_FRAG_BLOCK", 3)
-    blocked = hemicube_rows(patches, sources, resolution=32, rotate=True, rng=2)
-    assert np.array_equal(whole, blocked)
-    assert np.allclose(whole.sum(axis=1), 1.0, atol=1e-12)
-
-
-def _room_with_furniture():
-    """A closed box with a floating slab: general (near-clipped) items and items drawn on
-    several faces at once, from every source."""
-    corners, _ = box_quads((1.0, 1.5, 1.0), 0.25)
-    slab = [square(0.5, 0.75, 0.4, 0.5), square(0.5, 0.75, 0.4, 0.5, facing_up=False)]
-    return make_patches(np.concatenate([corners, slab]))
-
-
-def test_rows_do_not_depend_on_how_items_are_blocked(monkeypatch):
-    # Items are set up and drawn _ITEM_BLOCK at a time, and the rest of long spans is held
-    # back until _FRAG_BLOCK of them wait; the item ids (and so the tie rule) do not depend on
-    # either. Tiny blocks put block edges everywhere, in the main, face and general groups.
-    patches = _room_with_furniture()
-    sources = np.arange(0, patches.centres.shape[0], 5)
-    whole = hemicube_rows(patches, sources, resolution=32, rotate=True, rng=4)
-    monkeypatch.setattr(hemicube_raster, "_ITEM_BLOCK", 7)
-    monkeypatch.setattr(hemicube_raster, "_FRAG_BLOCK", 5)
-    blocked = hemicube_rows(patches, sources, resolution=32, rotate=True, rng=4)
-    assert np.array_equal(whole, blocked)
-    assert np.allclose(whole.sum(axis=1), 1.0, atol=1e-12)
-
-
-def test_polygons_beyond_a_face_are_dropped_only_when_clipping_would_drop_them(monkeypatch):
-    # Polygons straddling a face's near plane are first tested against the planes through the
-    # eye and the face's borders (with a margin) and clipped only if they may reach the face.
-    # Without that test (an infinite margin drops nothing) the rows must be the same.
-    patches = _room_with_furniture()
-    sources = np.arange(patches.centres.shape[0])
-    fast = hemicube_rows(patches, sources, resolution=16)
-    monkeypatch.setattr(hemicube_chunk, "_PYRAMID_MARGIN", np.inf)
-    hemicube._CACHE.clear()
-    slow = hemicube_rows(patches, sources, resolution=16)
-    assert np.array_equal(fast, slow)
-
-
-def test_kept_buffers_do_not_leak_between_calls_or_threads():
-    # The z-buffer and the tiled delta form factors are kept per thread and reused: calls of
-    # other sizes and resolutions in between, or in other threads at the same time, must not
-    # change a result.
-
-    patches = _room_with_furniture()
-    p = patches.centres.shape[0]
-    first = hemicube_rows(patches, np.arange(p), resolution=16)
-    hemicube_rows(patches, [0, 1, 2], resolution=32)
-    hemicube_rows(patches, np.arange(p // 2), resolution=16)
-    assert np.array_equal(hemicube_rows(patches, np.arange(p), resolution=16), first)
-    jobs = [(np.arange(p), 16), (np.arange(3), 32), (np.arange(p)[::-1], 16)] * 3
-    with ThreadPoolExecutor(max_workers=3) as pool:
-        results = list(pool.map(lambda job: hemicube_rows(patches, job[0], resolution=job[1]),
-                                jobs))
-    for (sources, resolution), rows in zip(jobs, results):
-        if resolution == 16:
-            assert np.array_equal(rows, first[sources])
