@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from bench.scenes import furnace_box, opposed_squares, room_with_boxes, unit_cube
-from conftest import horizontal_square
+from builders import horizontal_square
 from core import reciprocity, settings as settings_module
 from core.bake import BakeResult, BakeSettings, bake, form_factor_matrix, relight
 from core.errors import BakeCancelled, SettingsError

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from bench.scenes import furnace_box
-from conftest import grid
+from builders import grid
 from core import BakeSettings, SettingsError, bake, relight, scene_from_polygons
 from core.elements import make_elements
 from core.exact import point_polygon_form_factor

@@ -17,7 +17,7 @@ from core.hemicube import (FACE_NAMES, delta_form_factors, draw_polygons, hemicu
                            polygon_rows)
 from core.patches import patch_triangles
 
-from conftest import box_quads, centred_square as square, quad_patches as make_patches
+from builders import box_quads, centred_square as square, quad_patches as make_patches
 
 #: Howell's catalogue (shared/reference/form_factors.md).
 CUBE_OPPOSITE = 0.199824895698

@@ -8,7 +8,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from conftest import box_quads, centred_square as square, quad_patches as make_patches
+from builders import box_quads, centred_square as square, quad_patches as make_patches
 from core import hemicube, hemicube_chunk, hemicube_raster
 from core.hemicube import hemicube_rows
 

@@ -5,7 +5,7 @@ import importlib
 import numpy as np
 import pytest
 
-from conftest import horizontal_square
+from builders import horizontal_square
 from core import BakeSettings, SettingsError, bake, scene_from_polygons
 from core.patches import make_patches
 from core.refine import refine_mask

@@ -1,4 +1,8 @@
-"""Scene builders shared by the core tests (import them: ``from conftest import grid``)."""
+"""Scene builders shared by the core tests: ``from builders import grid``.
+
+A plain module, not conftest.py: test modules cannot import a conftest by name when another
+directory's conftest (tests/addon) is collected in the same run (both are module "conftest").
+"""
 
 from types import SimpleNamespace
 
