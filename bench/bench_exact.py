@@ -26,7 +26,7 @@ from core.exact import (  # noqa: E402
 from core.hemicube import hemicube_rows  # noqa: E402
 from core.patches import make_patches  # noqa: E402
 from core.raycast import any_hit, build_bvh, closest_hit  # noqa: E402
-from core.samples import room_with_boxes  # noqa: E402
+from bench.scenes import room_with_boxes  # noqa: E402
 from core.scene import scene_from_polygons  # noqa: E402
 
 

@@ -1,6 +1,6 @@
 """Benchmark of the hemicube rasteriser: seconds per source patch, peak memory, per-stage split.
 
-Scene: ``core.samples.room_with_boxes(n_quads)`` (closed room, two boxes, emissive ceiling
+Scene: ``bench.scenes.room_with_boxes(n_quads)`` (closed room, two boxes, emissive ceiling
 panel), one patch per quad. A random sample of source nodes (front sides) is timed, in calls of
 ``--batch`` sources as the bake makes them, after one warm-up call. Stages (CPU time): cull,
 items, spans (main group), general (near-plane-clipped groups) and accumulate exclude the
@@ -23,9 +23,10 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-from core.hemicube import _Geometry, draw_polygons, polygon_rows  # noqa: E402
+from core.hemicube import draw_polygons, polygon_rows
+from core.hemicube_chunk import Geometry  # noqa: E402
 from core.patches import make_patches  # noqa: E402
-from core.samples import room_with_boxes  # noqa: E402
+from bench.scenes import room_with_boxes  # noqa: E402
 
 STAGES = ("cull", "items", "spans", "general", "zbuffer", "accumulate")
 
@@ -37,10 +38,10 @@ def room_patches(n_quads):
 
 
 def setup(patches):
-    """(polys, poly_patch, _Geometry): the per-scene setup, made once per scene as
+    """(polys, poly_patch, Geometry): the per-scene setup, made once per scene as
     hemicube_rows caches it across a bake's calls."""
     polys, poly_patch = draw_polygons(patches)
-    return polys, poly_patch, _Geometry(polys, poly_patch, patches.normals)
+    return polys, poly_patch, Geometry(polys, poly_patch, patches.normals)
 
 
 def run(patches, drawn, sources, resolution, batch, *, rotate=False):

@@ -1,6 +1,6 @@
 """Benchmark of the solvers and of the whole bake's stage split.
 
-Scene: ``core.samples.room_with_boxes(n_quads)`` (closed room, two boxes, emissive panel 5 cm
+Scene: ``bench.scenes.room_with_boxes(n_quads)`` (closed room, two boxes, emissive panel 5 cm
 under the ceiling), one patch per quad. For each size the script
 
 1. bakes once (``solver='auto'``) and prints the stage split (patches, form factors, solve,
@@ -31,7 +31,7 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
 from core.bake import BakeSettings, bake  # noqa: E402
-from core.samples import room_with_boxes  # noqa: E402
+from bench.scenes import room_with_boxes  # noqa: E402
 from core.solvers import (solve_direct, solve_gauss_seidel, solve_jacobi,  # noqa: E402
                           solve_progressive)
 

@@ -4,16 +4,13 @@ Pure NumPy (1.26 and 2.x) and the standard library; never imports Blender. The p
 are re-exported here; see README.md for a runnable example and docs/design.md for the contract.
 """
 
+from .bake import BakeResult, bake, form_factor_matrix, relight
 from .errors import BakeCancelled, RadiosityError, SceneError, SettingsError
 from .scene import Scene, make_scene, scene_from_polygons
+from .settings import BakeSettings
 
 __all__ = [
     "BakeCancelled", "RadiosityError", "SceneError", "SettingsError",
     "Scene", "make_scene", "scene_from_polygons",
+    "BakeResult", "BakeSettings", "bake", "form_factor_matrix", "relight",
 ]
-
-try:  # The pipeline modules are imported when present (they land module by module).
-    from .bake import BakeResult, BakeSettings, bake, form_factor_matrix, relight  # noqa: F401
-    __all__ += ["BakeResult", "BakeSettings", "bake", "form_factor_matrix", "relight"]
-except ImportError:  # pragma: no cover - removed once the pipeline is complete
-    pass

@@ -10,7 +10,7 @@ import numpy as np
 
 from .constants import DEFAULT_CREASE_ANGLE
 from .geometry import within_crease
-from .patches import Patches, _check_scene
+from .patches import Patches, check_scene
 
 def corner_colours(scene, patches, patch_radiance, *, crease_angle=DEFAULT_CREASE_ANGLE):
     """Outgoing radiance at every scene corner.
@@ -33,7 +33,7 @@ def corner_colours(scene, patches, patch_radiance, *, crease_angle=DEFAULT_CREAS
         Area-weighted mean radiance per corner. Corners of dropped faces (``face_valid`` False)
         take the mean of the same-material patches at their vertex, else 0.
     """
-    _check_scene(scene)
+    check_scene(scene)
     if not isinstance(patches, Patches):
         raise TypeError(f"patches must be a Patches; got {type(patches).__name__}")
     n_p = patches.n_patches

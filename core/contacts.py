@@ -24,16 +24,11 @@ patch crossed by several lines is cut by each in turn (at most :data:`MAX_CUTS`)
 
 import numpy as np
 
+from . import constants
 from .geometry import newell_normals_areas, ragged
-from .patches import Patches, _assemble, _material_table, triangle_mask
+from .patches import Patches, assemble_patches, material_table, triangle_mask
 
-#: A vertex within this fraction of the scene's bounding diagonal from a plane lies in it (1 mm
-#: in a 10 m scene): an object placed on a floor by eye or by snapping touches it.
-CONTACT_TOL = 1e-4
 
-#: Faces whose unit normals have |cos| above this are parallel: a coplanar neighbour (the next
-#: floor tile) or a parallel face (a table top above the floor) is not a contact.
-PARALLEL_COS = 1.0 - 1e-6
 
 #: A patch is cut only if corners of it lie on both sides of the line farther than this fraction
 #: of its size (sqrt of area): a line that grazes a corner would leave a sliver that changes
@@ -83,7 +78,7 @@ def contact_segments(scene, faces, plane_n, plane_d, tol):
     if K == 0:
         return a, b, ok
     n_g = scene.face_normals[faces]
-    cand = np.abs(np.einsum("ij,ij->i", n_g, plane_n)) <= PARALLEL_COS
+    cand = np.abs(np.einsum("ij,ij->i", n_g, plane_n)) <= constants.tol.parallel_cos
     rows = np.flatnonzero(cand)
     if rows.size == 0:
         return a, b, ok
@@ -231,7 +226,7 @@ def find_contacts(scene, patches, *, tol=None):
     scene : core.scene.Scene
     patches : Patches
     tol : float, optional
-        Contact distance in metres (default ``CONTACT_TOL`` x the scene's bounding diagonal).
+        Contact distance in metres (default ``tol.contact`` x the bounding diagonal).
 
     Returns
     -------
@@ -239,7 +234,7 @@ def find_contacts(scene, patches, *, tol=None):
     """
     diag = scene.bounding_diagonal()
     if tol is None:
-        tol = CONTACT_TOL * diag
+        tol = constants.tol.contact * diag
     face = patches.face
     n_f = scene.face_normals[face]
     d_f = np.einsum("ij,ij->i", scene.vertices[scene.corner_verts[scene.face_starts[face]]], n_f)
@@ -371,7 +366,7 @@ def split_at_contacts(scene, patches, contacts=None, *, tol=None):
     contacts : Contacts, optional
         From :func:`find_contacts` for these patches (found here if not given).
     tol : float, optional
-        Contact distance in metres when the contacts are found here (default ``CONTACT_TOL`` x
+        Contact distance in metres when the contacts are found here (default ``tol.contact`` x
         the scene's bounding diagonal); given contacts carry their own.
 
     Returns
@@ -454,5 +449,5 @@ def split_at_contacts(scene, patches, contacts=None, *, tol=None):
         corners = new_corners
     info["added"] = int(corners.shape[0] - P0)
     n_faces = patches.face_patch_start.shape[0] - 1
-    new = _assemble(corners, face, _material_table(patches), n_faces, inc_v, inc_p, inc_c, inc_s)
+    new = assemble_patches(corners, face, material_table(patches), n_faces, inc_v, inc_p, inc_c, inc_s)
     return new, parent, info

@@ -19,7 +19,11 @@ needed, and each level costs one hemicube per new element.
 
 import numpy as np
 
-from .gather import GatherRows, compact_rows, shade
+from .gather import shade
+from .hemicube import point_rows
+from .patches import subdivide_patches
+from .refine import refine_mask
+from .rows import RowStore, compact_rows
 
 
 class Elements:
@@ -33,7 +37,7 @@ class Elements:
         Solved patch each element lies in.
     computed : (K,) int64
         Elements whose radiance was gathered at their centre (the rest copy their patch's).
-    rows : GatherRows
+    rows : core.rows.RowStore
         Point-to-node form factors (against the solved patches' 2P nodes) of ``computed``, in
         that order.
     levels : list of dict
@@ -100,10 +104,6 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
     -------
     Elements
     """
-    from .hemicube import point_rows
-    from .patches import subdivide_patches
-    from .refine import refine_mask
-
     L = np.asarray(node_radiance, dtype=np.float64)
     P = patches.areas.size
     if L.shape != (2 * P, 3):
@@ -144,9 +144,9 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
             if monitor is not None:
                 monitor.update((level + (s + ids.size) / new.size) / levels,
                                f"elements: level {level + 1}, {parent.size} elements")
-    # Rows kept in the order of ``computed`` (GatherRows' groups are positions in it).
+    # Rows kept in the order of ``computed`` (the store's row keys are positions in it).
     computed = np.concatenate([ids for ids, _, _ in kept]) if kept else np.zeros(0, np.int64)
-    store = GatherRows(computed.size, 2 * P)
+    store = RowStore(computed.size, 2 * P)
     start = 0
     for ids, cols, vals in kept:
         store.add_compact(np.arange(start, start + ids.size), cols, vals)

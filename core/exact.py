@@ -27,22 +27,21 @@ i.e. ~50x a R = 64 hemicube row; source_order="adaptive" adds ~60% on a room.
 
 import numpy as np
 
-from .constants import SURFACE_OFFSET
+from .constants import tol
+from .hemicube import hemicube_rows
 from .raycast import BVH, build_bvh, closest_hit
+from .settings import BY_NAME
+from .validate import check_bool, check_sources, is_int, is_real
 
-#: A polygon whose highest corner is below this fraction of its distance from the point, measured
-#: along the point's normal, lies in the point's tangent plane (or under it): F = 0. Without this,
-#: a coplanar polygon around the point would give the horizon's full winding (F = 1).
-COPLANAR_TOL = 1e-12
 
 #: Hybrid default: a pair is "near" when its centre distance is below NEAR_DEFAULT times the larger
-#: patch size (sqrt of area). Measured by bench/bench_exact.py (near sweep): the point-source
-#: (centre) error of opposed unit squares is +19.8% at distance = 1 size, +7.1% at 2, +3.4% at 3,
-#: +2.0% at 4, +1.3% at 5 (about 0.3 / k^2), whatever the hemicube resolution. At 4 it is below
-#: the aliasing of an R = 64 hemicube on such pairs (several %), and the near pairs of a uniform
-#: mesh stay a few % of all pairs: on room_with_boxes(2000) the hybrid costs 1.5x the plain
-#: hemicube (near = 6: 2.5x).
-NEAR_DEFAULT = 4.0
+#: patch size (sqrt of area); the bake's ``near`` setting (core.settings), one default for both.
+#: Measured by bench/bench_exact.py (near sweep): the point-source (centre) error of opposed unit
+#: squares is +19.8% at distance = 1 size, +7.1% at 2, +3.4% at 3, +2.0% at 4, +1.3% at 5 (about
+#: 0.3 / k^2), whatever the hemicube resolution; on room_with_boxes(2000) near = 4 costs 1.5x the
+#: plain hemicube (near = 6: 2.5x). Bakes have always used 1.5 (the adjacent and nearest pairs,
+#: where the error is largest), so that is the default.
+NEAR_DEFAULT = BY_NAME["near"].default
 
 #: Source quadrature of the hybrid's near pairs: Gauss-Legendre n x n points on the source patch,
 #: n rising through ADAPTIVE_ORDERS until two successive orders agree to ADAPTIVE_TOL (relative).
@@ -53,10 +52,6 @@ NEAR_DEFAULT = 4.0
 ADAPTIVE_ORDERS = (4, 8, 16, 32)
 ADAPTIVE_TOL = 1e-3
 
-#: Visibility rays count as unoccluded if their closest hit is at least this close (as a fraction
-#: of the segment) to the target point: the target itself may be reported as a coplanar neighbour
-#: hit at the same distance.
-VIS_EPS = 1e-7
 
 #: (source, target) pairs handled at once; bounds the pair arrays to a few tens of MB.
 PAIR_CHUNK = 4096
@@ -108,12 +103,12 @@ def _pair_form_factor(x, n, polys):
     r = polys - x[:, None, :]
     h = np.einsum("mkj,mj->mk", r, n)
     reach = np.sqrt(np.einsum("mkj,mkj->mk", r, r)).max(axis=1)
-    above = h.max(axis=1) > COPLANAR_TOL * reach
+    above = h.max(axis=1) > tol.coplanar * reach
     # A point in the polygon's own plane sees it edge-on: F = 0. (On its boundary the contour
     # sum would otherwise give a partial winding angle, e.g. 0.088 at a wall's corner.)
     area_vec = np.cross(r, np.roll(r, -1, axis=1)).sum(axis=1)        # Newell: 2 x area x normal
     edge_on = np.abs(np.einsum("mj,mj->m", area_vec, r.mean(axis=1))) <= \
-        COPLANAR_TOL * reach * np.sqrt(np.einsum("mj,mj->m", area_vec, area_vec))
+        tol.coplanar * reach * np.sqrt(np.einsum("mj,mj->m", area_vec, area_vec))
     poly, count = _clip_halfspace(r, h)
     a, b = poly, np.roll(poly, -1, axis=1)
     c = np.cross(a, b)
@@ -262,7 +257,7 @@ class _Geometry:
                              f"triangles); got one over {bvh.n_triangles} other triangles")
         self.bvh = bvh
         lo, hi = self.corners.min(axis=(0, 1)), self.corners.max(axis=(0, 1))
-        self.offset = SURFACE_OFFSET * max(float(np.linalg.norm(hi - lo)), 1e-300)
+        self.offset = tol.surface_offset * max(float(np.linalg.norm(hi - lo)), 1e-300)
 
     def node_frames(self, nodes):
         patch = nodes % self.n_patches
@@ -276,20 +271,8 @@ def _same_triangles(bvh, tris):
             and np.array_equal(bvh.e2, t[:, 2] - t[:, 0]))
 
 
-def _check_sources(sources, n_nodes):
-    s = np.asarray(sources)
-    if s.ndim != 1 or not (np.issubdtype(s.dtype, np.integer) or s.size == 0):
-        raise ValueError(f"sources must be a 1-D array of integer node ids; got dtype {s.dtype}, "
-                         f"shape {s.shape}")
-    s = s.astype(np.int64)
-    if s.size and (s.min() < 0 or s.max() >= n_nodes):
-        bad = s[(s < 0) | (s >= n_nodes)][0]
-        raise ValueError(f"sources must be node ids in [0, {n_nodes}); got {bad}")
-    return s
-
-
 def _check_common(rays, rng):
-    if isinstance(rays, bool) or not isinstance(rays, (int, np.integer)) or rays < 1:
+    if not is_int(rays) or rays < 1:
         raise ValueError(f"rays must be an integer >= 1; got {rays!r}")
     if rng is None:
         rng = np.random.default_rng(0)
@@ -359,7 +342,7 @@ def _pair_values(geo, nodes, targets, rays, rng, order):
     # A target wholly in or under the source's plane is invisible from every source point.
     h = np.einsum("mkj,mj->mk", geo.corners[targets] - geo.centres[patch][:, None, :], n)
     reach = np.abs(geo.corners[targets] - geo.centres[patch][:, None, :]).max(axis=(1, 2))
-    live = np.flatnonzero(h.max(axis=1) > COPLANAR_TOL * reach)
+    live = np.flatnonzero(h.max(axis=1) > tol.coplanar * reach)
     if order == "adaptive":
         f, b = _adaptive_average(geo, patch[live], n[live], targets[live])
     else:
@@ -396,10 +379,10 @@ def _visible_fraction(geo, src, n, tgt, rays, rng, area_source):
     # Pairs whose kernel vanishes at every sample (a sliver above the horizon) fall back to area.
     flat = w.sum(axis=1) <= 0.0
     w[flat] = jac[flat]
-    t, tri = closest_hit(geo.bvh, origin.reshape(-1, 3), d.reshape(-1, 3), 1.0 + VIS_EPS)
+    t, tri = closest_hit(geo.bvh, origin.reshape(-1, 3), d.reshape(-1, 3), 1.0 + tol.visibility)
     tri = tri.reshape(m, rays)
     hit_patch = np.where(tri >= 0, geo.tri_patch[np.maximum(tri, 0)], -1)
-    clear = (tri < 0) | (hit_patch == tgt[:, None]) | (t.reshape(m, rays) >= 1.0 - VIS_EPS)
+    clear = (tri < 0) | (hit_patch == tgt[:, None]) | (t.reshape(m, rays) >= 1.0 - tol.visibility)
     total = w.sum(axis=1)
     return np.divide((w * clear).sum(axis=1), total, out=np.ones(m), where=total > 0.0)
 
@@ -434,7 +417,7 @@ def exact_rows(patches, sources, *, rays=16, rng=None, bvh=None, source_order=1)
     """
     geo = _Geometry(patches, bvh)
     p = geo.n_patches
-    nodes = _check_sources(sources, 2 * p)
+    nodes = check_sources(sources, 2 * p)
     rays, rng = _check_common(rays, rng)
     order = _check_order(source_order)
     out = np.zeros((nodes.size, 2 * p))
@@ -454,7 +437,7 @@ def exact_rows(patches, sources, *, rays=16, rng=None, bvh=None, source_order=1)
 def _check_order(order):
     if isinstance(order, str) and order == "adaptive":
         return order
-    if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or order < 1:
+    if not is_int(order) or order < 1:
         raise ValueError(f"source_order must be an integer >= 1 or 'adaptive'; got {order!r}")
     return int(order)
 
@@ -527,18 +510,14 @@ def hybrid_rows(patches, sources, *, resolution=64, near=NEAR_DEFAULT, rays=16, 
     (S, 2P) float64
         Both columns (q and q + P) of every near pair come from the exact method.
     """
-    from .hemicube import hemicube_rows
-
     geo = _Geometry(patches, bvh)
     p = geo.n_patches
-    nodes = _check_sources(sources, 2 * p)
+    nodes = check_sources(sources, 2 * p)
     rays, rng = _check_common(rays, rng)
     order = _check_order(source_order)
-    if isinstance(near, bool) or not isinstance(near, (int, float, np.integer, np.floating)) \
-            or not np.isfinite(near) or near < 0:
+    if not is_real(near) or near < 0:
         raise ValueError(f"near must be a finite number >= 0; got {near!r}")
-    if not isinstance(conserve, (bool, np.bool_)):
-        raise TypeError(f"conserve must be a bool; got {type(conserve).__name__}")
+    check_bool("conserve", conserve)
     rows = np.array(hemicube_rows(patches, nodes, resolution=resolution, rotate=rotate, rng=rng),
                     dtype=np.float64)
     hemi_total = rows.sum(axis=1)

@@ -15,6 +15,8 @@ the adjacent wall is seen from the surface's side instead of exactly edge-on.
 import numpy as np
 
 from .geometry import pairs_by_key, within_crease
+from .hemicube import point_rows
+from .rows import RowStore, compact_rows  # noqa: F401  (compact_rows: re-exported)
 
 #: The gather point is moved from the vertex towards the centroids of its group's faces by this
 #: fraction of the faces' size (sqrt of area): a fraction of a millimetre for 0.2 m faces. It
@@ -42,7 +44,7 @@ class CornerGroups:
         self.group, self.points, self.normals, self.material = group, points, normals, material
 
 
-def corner_groups(scene, *, crease_angle=30.0, alone=None):
+def corner_groups(scene, *, crease_angle=30.0, on_contact=None):
     """Group the scene's corners for the final gather (vectorised join by vertex).
 
     Parameters
@@ -50,7 +52,7 @@ def corner_groups(scene, *, crease_angle=30.0, alone=None):
     scene : core.scene.Scene
     crease_angle : float
         Degrees: faces at a vertex whose normals differ by more are separate surfaces.
-    alone : (V,) bool, optional
+    on_contact : (V,) bool, optional
         Vertices whose corners are not grouped: each gathers on its own, with its face's normal,
         from a point moved into its own face. For vertices on a contact line
         (:class:`core.contacts.Contacts`): the floor corner of a face under a box must see the
@@ -78,7 +80,8 @@ def corner_groups(scene, *, crease_angle=30.0, alone=None):
     # All ordered pairs of valid corners at the same vertex (a vertex has few corners).
     i, j = pairs_by_key(v)
     same = (mat[i] == mat[j]) & within_crease(n[i], n[j], crease_angle)
-    single = np.zeros(valid_c.size, dtype=bool) if alone is None else np.asarray(alone)[v]
+    single = np.zeros(valid_c.size, dtype=bool) if on_contact is None \
+        else np.asarray(on_contact)[v]
     same &= ~single[i] | (i == j)
     i, j = i[same], j[same]
     # Smooth normal and inward direction of each corner: area-weighted over its surface's faces.
@@ -111,52 +114,20 @@ def corner_groups(scene, *, crease_angle=30.0, alone=None):
     return CornerGroups(group, points, normal, mat[first_of])
 
 
-def compact_rows(rows):
-    """(cols (K,), vals (S, K) float32): the columns of ``rows`` (S, n) that any row hits."""
-    cols = np.flatnonzero(np.any(rows > 0, axis=0))
-    return cols, rows[:, cols].astype(np.float32)
-
-
 def shade(scene, material, incident):
     """Outgoing radiance ``Le + rho * incident`` (n, 3) of receivers of ``material`` (n,)."""
     return np.asarray(scene.emission)[material] + np.asarray(scene.reflectance)[material] * incident
 
 
-class GatherRows:
-    """Point-to-node form factors of every corner group, kept compact for re-lighting."""
-
-    def __init__(self, n_groups, n_nodes):
-        self.n_groups, self.n_nodes = n_groups, n_nodes
-        self.batches = []          # (groups (S,), cols (K,), vals (S, K) float32)
-        self.nbytes = 0
-
-    def add(self, groups, rows):
-        """Keep ``rows`` (S, n_nodes) of ``groups`` (S,), compacted; returns (cols, vals)."""
-        cols, vals = compact_rows(rows)
-        self.add_compact(groups, cols, vals)
-        return cols, vals
-
-    def add_compact(self, groups, cols, vals):
-        """Keep rows already compacted by :func:`compact_rows`."""
-        self.batches.append((groups, cols, vals))
-        self.nbytes += vals.nbytes + cols.nbytes + groups.nbytes
-
-    def incident(self, node_radiance):
-        """(G, 3): sum_j F(group -> j) L_j."""
-        out = np.zeros((self.n_groups, 3))
-        L = np.asarray(node_radiance, dtype=np.float64)
-        for groups, cols, vals in self.batches:
-            out[groups] = vals.astype(np.float64) @ L[cols]
-        return out
+#: The gather's rows are kept like a bake's node rows (one store; row keys = corner groups).
+GatherRows = RowStore
 
 
 def gather_rows(patches, groups, *, resolution=64, rotate=True, rng=None, monitor=None,
                 batch=64):
-    """Hemicube rows at every group's gather point, kept compact (:class:`GatherRows`)."""
-    from .hemicube import point_rows
-
+    """Hemicube rows at every group's gather point, kept compact (:class:`core.rows.RowStore`)."""
     G = groups.points.shape[0]
-    store = GatherRows(G, 2 * patches.areas.size)
+    store = RowStore(G, 2 * patches.areas.size)
     for s in range(0, G, batch):
         idx = np.arange(s, min(s + batch, G))
         rows = point_rows(patches, groups.points[idx], groups.normals[idx],
@@ -174,7 +145,7 @@ def gathered_colours(scene, groups, store, node_radiance, fallback):
     ----------
     scene : core.scene.Scene
     groups : CornerGroups
-    store : GatherRows
+    store : core.rows.RowStore
     node_radiance : (2P, 3) float
     fallback : (C, 3) float
         Colours for corners of dropped faces (group -1).

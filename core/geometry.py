@@ -7,24 +7,16 @@ neither the Newell vector nor the shape), or its true corner counts are given as
 
 import numpy as np
 
-#: Turn (unit cross product of consecutive edges, along the normal) below which a quad corner
-#: counts as reflex. Slightly negative so that a straight corner (a quad with a vertex on an
-#: edge, turn 0 up to rounding) stays "convex": the bilinear grid handles it without folding.
-CONVEX_TURN_TOLERANCE = -1e-12
-
-#: Relative size (against the polygon's squared extent) below which an ear triangle counts as
-#: degenerate (collinear corners) in ear clipping: float64 rounding of 2-D cross products.
-EAR_AREA_TOLERANCE = 1e-14
+from .constants import tol
 
 
-#: Slack on the crease cosine: coplanar faces whose float64 normals differ by rounding (cos just
-#: below 1) must still join at crease_angle = 0.
-CREASE_COS_SLACK = 1e-12
+
+
 
 
 def within_crease(na, nb, crease_angle):
     """(n,) bool: unit normals ``na``, ``nb`` (n, 3) differ by at most ``crease_angle`` degrees."""
-    return np.einsum("ij,ij->i", na, nb) >= np.cos(np.radians(crease_angle)) - CREASE_COS_SLACK
+    return np.einsum("ij,ij->i", na, nb) >= np.cos(np.radians(crease_angle)) - tol.crease_cos
 
 
 def ragged(counts):
@@ -157,13 +149,13 @@ def quads_convex(quads, normals):
     Returns
     -------
     (n,) bool
-        True where every corner turn is >= ``CONVEX_TURN_TOLERANCE`` (straight corners count
+        True where every corner turn is >= ``tol.convex_turn`` (straight corners count
         as convex: a bilinear grid on such a quad does not fold).
     """
     quads = _as_polygons("quads", quads)
     if quads.shape[1] != 4:
         raise ValueError(f"quads must have shape (n, 4, 3); got {quads.shape}")
-    return np.all(corner_turns(quads, normals) >= CONVEX_TURN_TOLERANCE, axis=1)
+    return np.all(corner_turns(quads, normals) >= tol.convex_turn, axis=1)
 
 
 def split_concave_quads(quads, normals):
@@ -239,7 +231,7 @@ def triangulate_polygon(points, normal):
     rel = pts - pts.mean(axis=0)
     xy = np.stack([rel @ u, rel @ v], axis=1)
     extent = float(np.ptp(xy, axis=0).max()) if len(xy) else 0.0
-    tiny = EAR_AREA_TOLERANCE * max(extent, np.finfo(float).tiny) ** 2
+    tiny = tol.ear_area * max(extent, np.finfo(float).tiny) ** 2
 
     remaining = list(range(pts.shape[0]))
     triangles = []

@@ -28,14 +28,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .constants import tol
 from .errors import SettingsError
 from .geometry import (newell_normals_areas, quads_convex, ragged as _ragged,
                        split_concave_quads, triangulate_polygon)
-
-#: Relative slack in ``ceil(length / max_edge)``: an edge whose length is a whole multiple of
-#: ``max_edge`` up to float64 rounding (0.3 / 0.1 = 2.9999999999999996, 1.2 / 0.4 = 3.0000000000000004)
-#: gets that multiple, not one segment more. Segments may thus exceed max_edge by 1e-9 relative.
-EDGE_COUNT_SLACK = 1e-9
 
 #: Largest patch count make_patches builds; beyond it a too small max_edge would exhaust memory
 #: (about 0.5 kB per patch with the temporaries) long before a solve could finish.
@@ -109,7 +105,7 @@ def _check_max_edge(max_edge):
     return h
 
 
-def _check_scene(scene):
+def check_scene(scene):
     needed = ("vertices", "corner_verts", "face_starts", "face_sizes", "face_materials",
               "face_normals", "face_valid")
     missing = [name for name in needed if not hasattr(scene, name)]
@@ -187,7 +183,7 @@ def make_patches(scene, max_edge):
         With ``F`` faces; faces with ``face_valid`` False make no patches.
     max_edge : float
         Longest allowed patch edge, scene metres (> 0). Edges that are a whole multiple of it
-        may exceed it by ``EDGE_COUNT_SLACK`` relative (float64 rounding).
+        may exceed it by ``tol.edge_count`` relative (float64 rounding).
 
     Returns
     -------
@@ -203,11 +199,11 @@ def make_patches(scene, max_edge):
     Notes
     -----
     See the module docstring for the scheme. Measured patch counts (``max_edge`` 0.5 / 0.25 /
-    0.1 m): ``samples.cornell_box()`` 35 / 84 / 336; ``samples.room_with_boxes(2000)`` 1966 /
+    0.1 m): ``bench.scenes.cornell_box()`` 35 / 84 / 336; ``bench.scenes.room_with_boxes(2000)`` 1966 /
     2294 / 17694 (at 0.5 m every input quad already is one patch).
     """
     h = _check_max_edge(max_edge)
-    _check_scene(scene)
+    check_scene(scene)
     vertices = np.asarray(scene.vertices, dtype=np.float64)
     corner_verts = np.asarray(scene.corner_verts, dtype=np.int64)
     face_starts = np.asarray(scene.face_starts, dtype=np.int64)
@@ -230,7 +226,7 @@ def make_patches(scene, max_edge):
     # the short edge stays coarse (needles do not explode) and ties do not flood triangle meshes.
     tri_pts = vertices[corner_verts[tri_loops]]
     tri_len = np.linalg.norm(np.roll(tri_pts, -1, axis=1) - tri_pts, axis=2)
-    tri_own = np.maximum(np.ceil(tri_len / h * (1.0 - EDGE_COUNT_SLACK)), 1.0)
+    tri_own = np.maximum(np.ceil(tri_len / h * (1.0 - tol.edge_count)), 1.0)
     fan = tri_own.min(axis=1) < tri_own.max(axis=1)
     k = np.argmin(tri_len[fan], axis=1)
     fan_loops = np.take_along_axis(tri_loops[fan], (k[:, None] + np.array([0, 1, 2, 2])) % 3, axis=1)
@@ -254,7 +250,7 @@ def make_patches(scene, max_edge):
     t_edges = edge_of[4 * n_q:].reshape(-1, 3)
 
     length = np.linalg.norm(weld_points[edge_hi] - weld_points[edge_lo], axis=1)
-    own = np.maximum(np.ceil(length / h * (1.0 - EDGE_COUNT_SLACK)), 1.0)
+    own = np.maximum(np.ceil(length / h * (1.0 - tol.edge_count)), 1.0)
     # Ties: opposite edges of a quad (not the collapsed edge C-C of a fan), all edges of a triangle.
     links_a = np.concatenate([q_edges[~collapsed, 0], q_edges[:, 1], t_edges[:, 0], t_edges[:, 1]])
     links_b = np.concatenate([q_edges[~collapsed, 2], q_edges[:, 3], t_edges[:, 1], t_edges[:, 2]])
@@ -286,7 +282,7 @@ def make_patches(scene, max_edge):
     order = np.argsort(elem_face, kind="stable")
     rank = np.empty_like(order)
     rank[order] = np.arange(order.shape[0])
-    return _assemble(corners[order], elem_face[order], np.asarray(scene.face_materials, np.int64),
+    return assemble_patches(corners[order], elem_face[order], np.asarray(scene.face_materials, np.int64),
                      n_faces, corner_verts[inc_loop], rank[inc_patch], inc_loop, inc_slot)
 
 
@@ -483,7 +479,9 @@ def _centroids(corners, normals):
     return np.where(ok[:, None], centre, corners.mean(axis=1))
 
 
-def _assemble(corners, face, face_materials, n_faces, inc_vertex, inc_patch, inc_loop, inc_slot):
+def assemble_patches(corners, face, face_materials, n_faces, inc_vertex, inc_patch, inc_loop,
+                     inc_slot):
+    """A :class:`Patches` from its corners and incidence arrays (also used by core.contacts)."""
     normals, areas = newell_normals_areas(corners)
     centres = _centroids(corners, normals)
     counts = np.bincount(face, minlength=n_faces)
@@ -588,13 +586,13 @@ def subdivide_patches(patches, mask):
     inc_p = patches.incidence_patch
     new_inc = child_start[inc_p] + np.where(mask[inc_p], patches.incidence_slot, 0)
     n_faces = patches.face_patch_start.shape[0] - 1
-    new = _assemble(new_corners, patches.face[parent], _material_table(patches), n_faces,
+    new = assemble_patches(new_corners, patches.face[parent], material_table(patches), n_faces,
                     patches.incidence_vertex, new_inc, patches.incidence_corner,
                     patches.incidence_slot)
     return new, parent.astype(np.int64)
 
 
-def _material_table(patches):
+def material_table(patches):
     """A face -> material table that reproduces ``patches.material`` (faces without patches: 0)."""
     n_faces = patches.face_patch_start.shape[0] - 1
     table = np.zeros(n_faces, dtype=np.int64)

@@ -49,6 +49,16 @@ class Monitor:
         return time.perf_counter() - self._last_call >= POLL_INTERVAL
 
 
+def poll(monitor, message):
+    """In a loop of one stage: once a poll interval has passed, honour a pending cancel.
+
+    Reports the start of the current stage (fraction 0), so progress never moves backwards.
+    ``monitor`` may be None (nothing to poll).
+    """
+    if monitor is not None and monitor.due():
+        monitor.update(0.0, message)
+
+
 #: A monitor that never reports and never cancels.
 SILENT = Monitor()
 

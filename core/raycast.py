@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .constants import tol
 from .geometry import ragged
 
 #: Triangles per leaf at most. Larger leaves mean fewer wavefront levels (each level costs a few
@@ -27,13 +28,7 @@ from .geometry import ragged
 #: 16 -> 30k rays/s; 4 ties with 2 with half the nodes.
 LEAF_SIZE = 4
 
-#: A ray counts as parallel to a triangle when |cos| of the angle between the ray and the plane's
-#: normal is below this; such rays never hit it (they would graze it at t = inf or everywhere).
-PARALLEL_EPS = 1e-12
 
-#: Barycentric slack: triangles are enlarged by this fraction of their edges, so that rounding can
-#: never open a crack along an edge shared by two triangles.
-BARY_EPS = 1e-12
 
 #: Node boxes are padded by this fraction of the scene's bounding-box diagonal so that flat boxes
 #: (axis-aligned triangles) are not lost to rounding in the slab test. The test stays conservative:
@@ -199,14 +194,15 @@ def _intersect(o, d, dn, v0, e1, e2, scale):
     """Moller-Trumbore for paired rays and triangles (all (M, 3)); t of the hit, inf on a miss."""
     p = _cross(d, e2)
     det = _dot(e1, p)
-    ok = np.abs(det) > PARALLEL_EPS * scale * dn
+    ok = np.abs(det) > tol.ray_parallel * scale * dn
     inv = np.divide(1.0, det, out=np.zeros_like(det), where=ok)
     s = o - v0
     u = _dot(s, p) * inv
     q = _cross(s, e1)
     v = _dot(d, q) * inv
     t = _dot(e2, q) * inv
-    ok &= (u >= -BARY_EPS) & (v >= -BARY_EPS) & (u + v <= 1.0 + BARY_EPS) & (t > 0.0)
+    eps = tol.barycentric
+    ok &= (u >= -eps) & (v >= -eps) & (u + v <= 1.0 + eps) & (t > 0.0)
     return np.where(ok, t, np.inf)
 
 

@@ -9,6 +9,7 @@ constant across a patch and splitting it would only cost time.
 
 import numpy as np
 
+from .constants import tol
 from .geometry import pairs_by_key, within_crease
 
 #: Luminance weights (Rec. 709 / sRGB primaries, scene-linear) for comparing RGB radiance.
@@ -20,8 +21,6 @@ LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 #: large it is against a near-black corner's own level.
 DARK_FLOOR = 0.5
 
-#: Corner positions are matched after rounding to this fraction of the scene's size.
-POINT_TOL = 1e-9
 
 
 def refine_mask(patches, patch_radiance, emitting, *, threshold=0.1, crease_angle=30.0,
@@ -65,7 +64,7 @@ def refine_mask(patches, patch_radiance, emitting, *, threshold=0.1, crease_angl
     # Corner points shared by patches: quantised positions -> point ids.
     corners = patches.corners.reshape(-1, 3)
     scale = float(np.ptp(corners, axis=0).max()) or 1.0
-    keys = np.round(corners / (POINT_TOL * scale)).astype(np.int64)
+    keys = np.round(corners / (tol.point * scale)).astype(np.int64)
     _, point = np.unique(keys, axis=0, return_inverse=True)
     point = point.reshape(-1)
     patch = np.repeat(np.arange(P), 4)

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .constants import MAX_REFLECTANCE_EXCLUSIVE, MIN_FACE_AREA
+from .constants import MAX_REFLECTANCE_EXCLUSIVE, tol
 from .errors import SceneError
 from .geometry import ragged
 
@@ -274,7 +274,7 @@ def make_scene(vertices, corner_verts, face_starts, face_sizes, face_materials, 
                          f"{n_materials} materials ({label(f)})")
 
     normals, areas = _newell(vertices, corner_verts, face_starts, face_sizes)
-    valid = areas > MIN_FACE_AREA
+    valid = areas > tol.face_area
     normals = np.where(valid[:, None], normals / np.where(valid, areas, 1.0)[:, None], 0.0)
     areas = np.where(valid, areas, 0.0)
 

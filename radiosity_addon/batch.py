@@ -33,42 +33,57 @@ class _Parser(argparse.ArgumentParser):
         raise BatchError(f"bad option: {message}")
 
 
-def _positive_float(text):
-    value = float(text)
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0; got {text}")
-    return value
+def _option_type(row):
+    """argparse type of a settings row: parse, then check against the row (one range)."""
+    parse = int if row.type == "int" else float
+
+    def convert(text):
+        try:
+            return row.check(parse(text))
+        except ValueError as exc:      # core.SettingsError is a ValueError
+            raise argparse.ArgumentTypeError(str(exc)) from None
+    convert.__name__ = row.type        # argparse names the type in "invalid int value"
+    return convert
 
 
-def _positive_int(text):
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1; got {text}")
-    return value
+def add_option(parser, row):
+    """One command-line option from a settings row: ``--name-with-dashes``, help with units."""
+    flag = "--" + row.name.replace("_", "-")
+    text = f"{row.help}. Must be {row.describe()}"
+    if row.type == "bool":
+        parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=None,
+                            help=f"{row.help}")
+    elif row.type == "choice":
+        parser.add_argument(flag, choices=row.values(), help=f"{row.help}: " + "; ".join(
+            f"{c.value}: {c.help}" for c in row.choices))
+    else:
+        if row.low is not None and row.high is not None and row.type == "int":
+            metavar = f"{row.low}..{row.high}"
+        else:
+            metavar = row.unit.upper() if row.unit and " " not in row.unit else "N"
+        parser.add_argument(flag, type=_option_type(row), metavar=metavar, help=text)
 
 
 def build_parser(need_input):
-    """The command-line parser (*need_input*: the .blend is a positional argument)."""
-    p = _Parser(prog=PROG, description="Bake radiosity into vertex colours, headless.")
+    """The command-line parser (*need_input*: the .blend is a positional argument).
+
+    The bake options are made from the settings table (``props.OPTIONS``); anything not given
+    comes from the .blend's own settings.
+    """
+    # Imported here, not at the top: this file also runs as a plain script (``__main__``),
+    # where the package's relative imports exist only once _load_package() has run.
+    from .props import OPTIONS
+
+    p = _Parser(prog=PROG, description="Bake radiosity into vertex colours, headless. Bake "
+                "options not given come from the .blend's own settings (Scene > Radiosity).")
     if need_input:
         p.add_argument("input", help="the .blend to bake (never modified unless --in-place)")
     p.add_argument("--output", help="where to save the baked .blend")
     p.add_argument("--in-place", action="store_true", help="overwrite the input .blend")
     p.add_argument("--report", help="write the bake report (JSON) here")
     p.add_argument("--render", help="render the baked colours (Workbench) to this PNG")
-    p.add_argument("--patch-size", type=_positive_float)
-    p.add_argument("--method", choices=["hemicube", "exact", "hybrid"])
-    p.add_argument("--resolution", type=_positive_int)
-    p.add_argument("--solver", choices=["auto", "direct", "jacobi", "gauss_seidel", "progressive"])
-    p.add_argument("--tolerance", type=_positive_float)
-    p.add_argument("--max-iterations", type=_positive_int)
-    p.add_argument("--corners", choices=["gather", "average"])
-    p.add_argument("--refine-levels", type=int, choices=range(0, 5), metavar="0..4")
-    p.add_argument("--element-levels", type=int, choices=range(0, 4), metavar="0..3")
-    p.add_argument("--no-contact-cuts", dest="contact_cuts", action="store_false", default=None,
-                   help="do not cut patches along contact lines (objects on surfaces)")
-    p.add_argument("--selected-only", action="store_true", default=None)
-    p.add_argument("--make-single-user", action="store_true", default=None)
+    for row in OPTIONS:
+        add_option(p, row)
     return p
 
 

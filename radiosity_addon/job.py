@@ -16,12 +16,14 @@ from dataclasses import dataclass
 
 from .. import core
 from ..core.errors import BakeCancelled, RadiosityError
+from ..core.settings import EXPOSED, as_dict
 from .extract import extract
+from .props import OPTIONS, from_blender
 from .write import WriteError, check_writable, show_in_viewports, write_colours
 
-#: Bake options that come from the panel / the batch command line and go to core.BakeSettings.
-CORE_OPTIONS = ("patch_size", "method", "resolution", "solver", "tolerance", "max_iterations",
-                "corners", "refine_levels", "element_levels", "contact_cuts")
+#: Bake options that come from the panel / the batch command line and go to core.BakeSettings:
+#: the exposed rows of the core's settings table.
+CORE_OPTIONS = EXPOSED
 
 
 class BakeError(RuntimeError):
@@ -41,13 +43,12 @@ class BakeInput:
 
 
 def options_from_props(props):
-    """Bake options (dict) from the scene's RadiositySettings property group."""
-    return dict(patch_size=props.patch_size, method=props.method.lower(),
-                resolution=props.resolution, solver=props.solver.lower(),
-                tolerance=props.tolerance, max_iterations=props.max_iterations,
-                corners=props.corners.lower(), refine_levels=props.refine_levels,
-                element_levels=props.element_levels, contact_cuts=props.contact_cuts,
-                selected_only=props.selected_only, make_single_user=props.make_single_user)
+    """Bake options (dict) from the scene's RadiositySettings property group.
+
+    Lengths are converted to metres with the scene's unit scale (the core works in metres).
+    """
+    scale = float(props.id_data.unit_settings.scale_length) or 1.0
+    return {row.name: from_blender(row, getattr(props, row.name), scale) for row in OPTIONS}
 
 
 def prepare(context, options):
@@ -112,7 +113,7 @@ def make_report(bake_input, result, write_seconds):
     """The bake summary (JSON-serialisable dict): core report + settings + add-on notes."""
     report = json.loads(json.dumps(result.report, default=_jsonable))
     ext = bake_input.extraction
-    report["settings"] = {k: getattr(bake_input.settings, k) for k in CORE_OPTIONS}
+    report["settings"] = as_dict(bake_input.settings)
     report["objects"] = len(ext.parts)
     report["instances"] = ext.instances
     report["area_lights"] = ext.lights

@@ -1,74 +1,95 @@
-"""Bake settings stored in the .blend (Scene.radiosity) and runtime progress (WindowManager)."""
+"""Bake settings stored in the .blend (Scene.radiosity) and runtime progress (WindowManager).
+
+The bake's properties are made from the core's settings table (``core.settings.TABLE``, the rows
+with ``exposed=True``) and the add-on's own rows (:data:`ADDON_OPTIONS`): one declaration per
+option, shared with the batch command line and the report.
+"""
 
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
-from ..core.constants import DEFAULT_MAX_ITERATIONS, DEFAULT_TOLERANCE
+from ..core.settings import BY_NAME, EXPOSED, Setting
+from .write import show_in_viewports
 
-METHODS = [
-    ("HEMICUBE", "Hemicube", "Cohen-Greenberg hemicube, made reciprocal (default: on the "
-                             "speed-accuracy front against Cycles)"),
-    ("EXACT", "Exact", "Contour-integral form factors with ray-traced visibility: slow, accurate"),
-    ("HYBRID", "Hybrid", "Hemicube, with near patch pairs computed exactly"),
-]
-CORNERS = [
-    ("GATHER", "At Vertex", "Gather the solved light at every vertex: the value there, as Cycles "
-     "bakes it (default; about one more hemicube per vertex)"),
-    ("AVERAGE", "Patch Average", "Average the patches around each vertex (Gouraud): free, but a "
-     "patch mean, off next to lights, in corners and along shadow edges"),
-]
-SOLVERS = [
-    ("AUTO", "Auto", "Pick the solver from the scene size and memory budget"),
-    ("DIRECT", "Direct", "Dense linear solve: exact, small scenes only"),
-    ("JACOBI", "Jacobi", "Jacobi iterations"),
-    ("GAUSS_SEIDEL", "Gauss-Seidel", "Gauss-Seidel sweeps"),
-    ("PROGRESSIVE", "Progressive", "Progressive refinement (shooting): no full matrix kept"),
-]
+#: Options of the add-on itself (not core.BakeSettings), declared like the core's settings.
+ADDON_OPTIONS = (
+    Setting("selected_only", "bool", False, "Selected Only",
+            "Bake only selected meshes (lights always count)"),
+    Setting("make_single_user", "bool", False, "Single User",
+            "Give objects that share a mesh their own copy, so each gets its own lighting "
+            "(otherwise such a bake stops with a message)"),
+)
+
+#: Every bake option of the panel and the batch script, in the panel's order.
+OPTIONS = tuple(BY_NAME[name] for name in EXPOSED) + ADDON_OPTIONS
+
+
+def enum_items(row):
+    """Blender enum items of a choice row: upper-case identifiers (``'hemicube'`` -> HEMICUBE)."""
+    return [(c.value.upper(), c.label, c.help) for c in row.choices]
+
+
+def from_blender(row, value, unit_scale=1.0):
+    """A property's value as the core expects it.
+
+    Enum identifiers go back to lower case; lengths (``row.is_length``) from Blender units to
+    metres with the scene's unit scale, as the scene's coordinates are (extract.py): the panel
+    shows a length times the unit scale, so what it shows is what the bake uses.
+    """
+    if row.type == "choice":
+        return value.lower()
+    if row.is_length:
+        return value * unit_scale
+    return value
+
+
+def _make_even(name):
+    def update(self, context):
+        value = getattr(self, name)
+        if value % 2:      # typed or dragged to an odd value: the next even one
+            setattr(self, name, value + 1 if value + 1 <= BY_NAME[name].high else value - 1)
+    return update
+
+
+def make_property(row):
+    """The bpy property of one settings row (label, tooltip, default, bounds, unit)."""
+    common = dict(name=row.label, description=row.help)
+    if row.type == "bool":
+        return BoolProperty(default=row.default, **common)
+    if row.type == "choice":
+        return EnumProperty(items=enum_items(row), default=row.default.upper(), **common)
+    limits = {}
+    if row.low is not None:
+        limits["min"] = row.low + 1 if row.type == "int" and row.open_low else row.low
+    if row.high is not None:
+        limits["max"] = row.high - 1 if row.type == "int" and row.open_high else row.high
+    if row.soft is not None:
+        limits["soft_min"], limits["soft_max"] = row.soft
+    if row.type == "int":
+        if row.even:
+            limits.update(step=2, update=_make_even(row.name))
+        return IntProperty(default=row.default, **limits, **common)
+    if row.digits is not None:
+        limits["precision"] = row.digits
+    if row.is_length:
+        limits.update(subtype="DISTANCE", unit="LENGTH")
+    return FloatProperty(default=row.default, **limits, **common)
 
 
 def _show_bake_changed(self, context):
-    from .write import show_in_viewports
-
     wm = context.window_manager
     if wm is not None:
         show_in_viewports([w.screen for w in wm.windows], self.show_bake)
 
 
 class RadiositySettings(bpy.types.PropertyGroup):
-    patch_size: FloatProperty(
-        name="Patch Size", description="Largest patch edge; smaller is finer and slower",
-        default=0.5, min=1e-4, soft_min=0.01, soft_max=5.0, subtype="DISTANCE", unit="LENGTH")
-    method: EnumProperty(name="Form Factors", items=METHODS, default="HEMICUBE")
-    resolution: IntProperty(name="Hemicube Resolution", description="Pixels across a hemicube face",
-                            default=64, min=8, max=1024)
-    solver: EnumProperty(name="Solver", items=SOLVERS, default="AUTO")
-    corners: EnumProperty(name="Corner Colours", items=CORNERS, default="GATHER")
-    refine_levels: IntProperty(
-        name="Adaptive Levels", default=0, min=0, max=4,
-        description="Split patches where the solved light changes between neighbours and solve "
-                    "again, this many times (0: off)")
-    element_levels: IntProperty(
-        name="Receiver Levels", default=2, min=0, max=3,
-        description="After the solve, split patches where the light changes into smaller "
-                    "receivers for the vertex colours, this many times (no re-solve; 0: off)")
-    contact_cuts: BoolProperty(
-        name="Cut at Contacts", default=True,
-        description="Cut patches along the lines where objects touch or pierce a surface (a "
-                    "box on a floor), so no light leaks under objects and their feet are not "
-                    "too dark")
-    tolerance: FloatProperty(name="Tolerance", description="Relative residual to stop at",
-                             default=DEFAULT_TOLERANCE, min=1e-9, max=0.5, precision=6)
-    max_iterations: IntProperty(name="Iteration Cap", default=DEFAULT_MAX_ITERATIONS, min=1)
-    selected_only: BoolProperty(name="Selected Only",
-                                description="Bake only selected meshes (lights always count)")
-    make_single_user: BoolProperty(
-        name="Make Single User",
-        description="Give objects that share a mesh their own copy, so each gets its own "
-                    "lighting (otherwise such a bake stops with a message)")
-    show_bake: BoolProperty(name="Show Bake", default=True, update=_show_bake_changed,
-                            description="Show the baked colours flat in Solid viewports")
-    last_report: StringProperty(name="Last Bake", description="JSON summary of the last bake",
-                                options={"HIDDEN"})
+    __annotations__ = {row.name: make_property(row) for row in OPTIONS}
+    __annotations__.update(
+        show_bake=BoolProperty(name="Show Bake", default=True, update=_show_bake_changed,
+                               description="Show the baked colours flat in Solid viewports"),
+        last_report=StringProperty(name="Last Bake", description="JSON summary of the last bake",
+                                   options={"HIDDEN"}),
+    )
 
 
 CLASSES = (RadiositySettings,)

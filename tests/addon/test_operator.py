@@ -418,11 +418,16 @@ def test_disk_light_polygon_keeps_area_and_faces_down(package):
 
 
 def test_unit_scale_sets_patch_size_in_metres(package):
+    # Lengths in the panel are in scene units, shown (and baked) times the unit scale: with
+    # 1 unit = 2 m, the faces are 2 m across and a patch size of 0.5 units is 1 m.
     v, f = box(1.0)
     mesh_object("Furnace", v, f, material("m", (0.5,) * 3, emission=(1, 1, 1)))
     assert bake_ok(patch_size=0.5, resolution=8)["patches"] == 6 * 4
-    bpy.context.scene.unit_settings.scale_length = 2.0  # 1 unit = 2 m: faces 2 m across
-    assert bake_ok()["patches"] == 6 * 16
+    bpy.context.scene.unit_settings.scale_length = 2.0
+    report = bake_ok()
+    assert report["patches"] == 6 * 4
+    assert report["settings"]["patch_size"] == pytest.approx(1.0)
+    assert bake_ok(patch_size=0.25)["patches"] == 6 * 16
 
 
 def test_image_texture_colour_is_averaged_and_reported(package):
@@ -518,9 +523,45 @@ def test_clear_removes_only_our_attribute_and_viewport_shows_it(package):
 
 def test_bad_setting_and_edit_mode_are_reported(package):
     light_over_floor()
-    set_settings(bpy.context.scene, resolution=33)  # the core wants an even resolution
-    with pytest.raises(RuntimeError, match="resolution"):
+    # The panel holds what the core's settings table allows (one range): an odd resolution
+    # becomes the next even one, a tolerance of 0 (the range is open) is refused by the core,
+    # by name, before any work.
+    set_settings(bpy.context.scene, resolution=33)
+    assert bpy.context.scene.radiosity.resolution == 34
+    set_settings(bpy.context.scene, resolution=2047)
+    assert bpy.context.scene.radiosity.resolution == 2048        # the hemicube's largest
+    set_settings(bpy.context.scene, tolerance=0.0)
+    with pytest.raises(RuntimeError, match="tolerance must be a number in"):
         bpy.ops.radiosity.bake()
+
+
+def test_panel_properties_are_the_settings_table(package):
+    # Every exposed row of core.settings is a property with the row's label, default and
+    # bounds; enums keep upper-case identifiers that map back to the core's values.
+    settings = PACKAGE.core.settings
+    job = PACKAGE.radiosity_addon.job
+    rna = bpy.types.Scene.bl_rna.properties["radiosity"].fixed_type.properties
+    for name in settings.EXPOSED:
+        row = settings.BY_NAME[name]
+        prop = rna[name]
+        assert prop.name == row.label
+        if row.type == "choice":
+            assert prop.default.lower() == row.default
+            assert [i.identifier.lower() for i in prop.enum_items] == list(row.values())
+        else:
+            assert prop.default == pytest.approx(row.default)
+        if row.type in ("int", "float") and row.low is not None:
+            assert prop.hard_min == pytest.approx(row.low)
+        if row.type in ("int", "float") and row.high is not None:
+            assert prop.hard_max == pytest.approx(row.high)
+    options = job.options_from_props(bpy.context.scene.radiosity)
+    defaults = settings.BakeSettings()
+    for name in settings.EXPOSED:      # float32 in Blender: 1e-4 comes back as 9.99999974e-05
+        want = getattr(defaults, name)
+        if isinstance(want, str):
+            assert options[name] == want
+        else:
+            assert options[name] == pytest.approx(want, rel=1e-6), name
 
 
 class _Layout:

@@ -1,5 +1,6 @@
 """Tests of core/bake.py: the whole pipeline against closed forms and identities."""
 
+import dataclasses
 import importlib
 import threading
 import time
@@ -7,14 +8,15 @@ import time
 import numpy as np
 import pytest
 
+from bench.scenes import furnace_box, opposed_squares, room_with_boxes, unit_cube
+from builders import horizontal_square
+from core import reciprocity, settings as settings_module
 from core.bake import BakeResult, BakeSettings, bake, form_factor_matrix, relight
 from core.errors import BakeCancelled, SettingsError
-from core.samples import furnace_box, opposed_squares, room_with_boxes, unit_cube
 from core.scene import scene_from_polygons
 from core.solvers import solve_direct
 
 # core/__init__ re-exports the function bake, which hides the module of the same name.
-bake_module = importlib.import_module("core.bake")
 
 #: Small hemicubes keep the tests fast; the furnace and symmetry identities hold at any R.
 R = 32
@@ -31,27 +33,13 @@ def _settings(**kw):
     return BakeSettings(**kw)
 
 
-def _square(z, size, n, down, x0=0.0):
-    """Vertices and quads of an n x n grid square at height z, normal -z if ``down``."""
-    t = np.linspace(0.0, size, n + 1)
-    xx, yy = np.meshgrid(t + x0, t + x0, indexing="ij")
-    verts = np.stack([xx.ravel(), yy.ravel(), np.full(xx.size, z)], axis=1)
-    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
-    quads = []
-    for i in range(n):
-        for j in range(n):
-            q = [idx[i, j], idx[i + 1, j], idx[i + 1, j + 1], idx[i, j + 1]]   # normal +z
-            quads.append(q[::-1] if down else q)
-    return verts, quads
-
-
 def _panel_under_ceiling(n=4, gap=1.0):
     """A ceiling square (normal down, grey) and an emitting panel ``gap`` below it facing down.
 
     Only the panel's back side faces the ceiling.
     """
-    v1, q1 = _square(gap, 1.0, n, down=True)
-    v2, q2 = _square(0.0, 1.0, n, down=True)
+    v1, q1 = horizontal_square(gap, 1.0, n, down=True)
+    v2, q2 = horizontal_square(0.0, 1.0, n, down=True)
     verts = np.vstack([v1, v2])
     quads = q1 + [[i + len(v1) for i in q] for q in q2]
     mats = [0] * len(q1) + [1] * len(q2)
@@ -72,7 +60,7 @@ def test_white_furnace(rho):
     # relative (Neumann series), so that is the tolerance, plus float32 storage (1e-6).
     scene = furnace_box(rho=rho, le=1.5, n=3)
     res = bake(scene, _settings(patch_size=0.4))
-    tol = bake_module.RECIPROCITY_TOL * rho / (1 - rho) + 1e-6
+    tol = reciprocity.RECIPROCITY_TOL * rho / (1 - rho) + 1e-6
     np.testing.assert_allclose(res.corner_colours, 1.5 / (1 - rho), rtol=tol)
     P = res.report["patches"]
     np.testing.assert_allclose(res.patch_radiance, 1.5 / (1 - rho), rtol=tol)
@@ -169,8 +157,8 @@ def test_energy_balance_one_sided_black_backs():
     # square's lit side is its black back. Sender-based closed forms with f = F(emitter ->
     # square's back node): absorbed = pi A Le f, escaped = pi A Le (1 - f), balance 0 without
     # any reciprocity assumption; the square is reported as lit from behind.
-    v1, q1 = _square(1.0, 1.0, 1, down=True)
-    v2, q2 = _square(0.0, 1.0, 1, down=True)
+    v1, q1 = horizontal_square(1.0, 1.0, 1, down=True)
+    v2, q2 = horizontal_square(0.0, 1.0, 1, down=True)
     scene = scene_from_polygons(np.vstack([v1, v2]), q1 + [[i + 4 for i in q2[0]]], [0, 1],
                                 [[0.0] * 3, [0.5] * 3], [[2.0] * 3, [0.0] * 3])
     res = bake(scene, _settings(patch_size=1.0, rotate_hemicube=False, two_sided=False))
@@ -214,7 +202,8 @@ def test_matrix_free_progressive(monkeypatch):
     # From rows only, shooting solves the system with the reciprocal columns
     # G_js = A_s F_sj / A_j; oracle: a direct solve of that system with F from
     # form_factor_matrix (same rows: no rotation).
-    monkeypatch.setattr(bake_module, "MIN_MEMORY_BUDGET", 1)
+    row = settings_module.BY_NAME["memory_budget"]
+    monkeypatch.setitem(settings_module.BY_NAME, "memory_budget", dataclasses.replace(row, low=1))
     scene = unit_cube(n=1, emitting=("z+",), reflectance=0.6)
     res = bake(scene, _settings(patch_size=1.0, rotate_hemicube=False, memory_budget=1,
                                 tolerance=1e-9))
@@ -375,8 +364,9 @@ def test_report_keys(small_room_direct):
     ("patch_size", 0.0, "patch_size must be a finite number > 0"),
     ("patch_size", float("nan"), "patch_size must be a finite number > 0"),
     ("method", "radiance", "method must be one of 'hemicube', 'exact', 'hybrid'; got 'radiance'"),
-    ("resolution", 33, r"resolution must be an even integer in \[4, 4096\]; got 33"),
-    ("resolution", 64.0, r"resolution must be an even integer in \[4, 4096\]; got 64.0"),
+    ("resolution", 33, r"resolution must be an even integer in \[4, 2048\] \(px\); got 33"),
+    ("resolution", 64.0, r"resolution must be an even integer in \[4, 2048\] \(px\); got 64.0"),
+    ("resolution", 3000, r"resolution must be an even integer in \[4, 2048\] \(px\); got 3000"),
     ("rotate_hemicube", 1, "rotate_hemicube must be True or False; got 1"),
     ("solver", "cg", "solver must be one of 'auto', 'direct', 'jacobi', 'gauss_seidel', "
                      "'progressive'; got 'cg'"),
@@ -384,9 +374,10 @@ def test_report_keys(small_room_direct):
     ("tolerance", 1.0, r"tolerance must be a number in \(0, 1\); got 1.0"),
     ("max_iterations", 0, "max_iterations must be an integer >= 1; got 0"),
     ("two_sided", "yes", "two_sided must be True or False; got 'yes'"),
-    ("crease_angle", 181.0, r"crease_angle must be a number of degrees in \[0, 180\]; got 181.0"),
-    ("memory_budget", 1000,
-     "memory_budget must be an integer number of bytes >= 1048576; got 1000"),
+    ("crease_angle", 181.0, r"crease_angle must be a number in \[0, 180\] \(deg\); got 181.0"),
+    ("memory_budget", 1000, r"memory_budget must be an integer >= 1048576 \(bytes\); got 1000"),
+    ("reciprocity", 1, "reciprocity must be True, False or 'auto'; got 1"),
+    ("near", -0.5, r"near must be a finite number >= 0 \(x patch size\); got -0.5"),
     ("seed", -1, "seed must be an integer >= 0; got -1"),
     ("rays", 0, "rays must be an integer >= 1; got 0"),
 ])

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from core import samples, scene_from_polygons
+from bench import scenes as samples
+from core import scene_from_polygons
 from core.colours import corner_colours
 from core.patches import make_patches
 

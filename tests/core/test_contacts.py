@@ -8,12 +8,14 @@ path tracer reads exactly 0 there (tests/compare shows Cycles does).
 import numpy as np
 import pytest
 
+from bench.scenes import _Builder
 from core import BakeSettings, bake
 from core.bake import make_reciprocal
-from core.contacts import CONTACT_TOL, find_contacts, split_at_contacts
+from core.constants import tol
+from core.contacts import find_contacts, split_at_contacts
 from core.errors import SettingsError
 from core.patches import make_patches
-from core.samples import _Builder
+from core.scene import make_scene
 
 FLOOR, BOX, WALL, LAMP = 0, 1, 2, 3
 
@@ -169,14 +171,13 @@ def test_a_corner_on_the_outline_takes_the_light_of_its_own_side():
 
 def test_contact_tolerance_and_parallel_faces():
     # A box floating 1 cm above the floor touches nothing (no cut); one within the contact
-    # distance (CONTACT_TOL of the bounding diagonal) does.
-    for lift, expect in ((0.01, False), (0.2 * CONTACT_TOL, True)):
+    # distance (tol.contact of the bounding diagonal) does.
+    for lift, expect in ((0.01, False), (0.2 * tol.contact, True)):
         scene = _room(ROTATED, walls=False)
         verts = scene.vertices.copy()
         box = scene.face_objects[np.repeat(np.arange(scene.n_faces), scene.face_sizes)] == 1
         vb = np.unique(scene.corner_verts[box])
         verts[vb, 2] += lift
-        from core.scene import make_scene
         moved = make_scene(verts, scene.corner_verts, scene.face_starts, scene.face_sizes,
                            scene.face_materials, scene.reflectance, scene.emission,
                            face_objects=scene.face_objects, object_names=scene.object_names)
@@ -191,7 +192,6 @@ def test_a_box_sunk_into_the_floor_cuts_along_its_section():
     face_of = np.repeat(np.arange(scene.n_faces), scene.face_sizes)
     vb = np.unique(scene.corner_verts[scene.face_objects[face_of] == 1])
     verts[vb, 2] -= 0.05
-    from core.scene import make_scene
     sunk = make_scene(verts, scene.corner_verts, scene.face_starts, scene.face_sizes,
                       scene.face_materials, scene.reflectance, scene.emission,
                       face_objects=scene.face_objects, object_names=scene.object_names)

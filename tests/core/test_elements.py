@@ -11,11 +11,12 @@ import importlib
 import numpy as np
 import pytest
 
+from bench.scenes import furnace_box
+from builders import grid
 from core import BakeSettings, SettingsError, bake, relight, scene_from_polygons
 from core.elements import make_elements
 from core.exact import point_polygon_form_factor
 from core.patches import make_patches
-from core.samples import furnace_box
 
 H, DROP, LE, RHO_CEILING, RHO_FLOOR = 1.5, 0.05, 10.0, 0.8, 1e-3
 PANEL = (0.75, 1.25)            # x and y extent: its edges cut the 0.5 m ceiling faces in half
@@ -23,15 +24,6 @@ PANEL = (0.75, 1.25)            # x and y extent: its edges cut the 0.5 m ceilin
 #: Floor points (shared vertices of every mesh used) where the bake is compared.
 POINTS = np.array([[a, b, 0.0] for a in (0.5, 1.0, 1.5) for b in (0.5, 1.0, 1.5)]
                   + [[0.0, 1.0, 0.0]])
-
-
-def _grid(origin, a, b, n):
-    origin, a, b = (np.asarray(v, float) for v in (origin, a, b))
-    t = np.linspace(0.0, 1.0, n + 1)
-    verts = (origin + t[:, None, None] * a + t[None, :, None] * b).reshape(-1, 3)
-    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
-    quads = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1)
-    return verts, quads.reshape(-1, 4)         # counter-clockwise about a x b
 
 
 def _panel_corners():
@@ -48,9 +40,9 @@ def hung_panel(n=4):
              ((p0, p0, H - DROP), (0, p1 - p0, 0), (p1 - p0, 0, 0), 1, 2)]   # panel, -z
     verts, polys, mats, off = [], [], [], 0
     for origin, a, b, k, m in parts:
-        v, q = _grid(origin, a, b, k)
+        v, q = grid(origin, a, b, k)
         verts.append(v)
-        polys += (q + off).tolist()
+        polys += (np.asarray(q) + off).tolist()
         mats += [m] * len(q)
         off += len(v)
     return scene_from_polygons(np.vstack(verts), polys, mats,

@@ -5,9 +5,13 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+import core.exact as ex
+from bench.scenes import room_with_boxes
+from core import patches as core_patches
 from core.exact import (
     _clip_halfspace, exact_rows, hybrid_rows, near_pairs, point_polygon_form_factor, ray_triangles,
 )
+from core.hemicube import hemicube_rows
 from core.raycast import build_bvh
 
 #: The closed forms below are exact and the contour formula has no discretisation: only float64
@@ -233,7 +237,6 @@ def test_point_polygon_does_not_mutate_inputs():
 
 
 def test_chunking_does_not_change_the_result(monkeypatch):
-    import core.exact as ex
     rng = np.random.default_rng(13)
     x, n, polys = rng.normal(size=(30, 3)), rng.normal(size=(30, 3)), rng.normal(size=(20, 4, 3))
     whole = point_polygon_form_factor(x, n, polys)
@@ -334,11 +337,8 @@ def test_closed_room_with_boxes_sum_rule_and_hemicube_agreement():
     # program, R = 128) the rows agree to the hemicube's aliasing plus ray noise.
     # Tolerances: rays = 16 gave row sums within 5.3e-3 of 1 and L1 row differences <= 3.8%
     # over 4 seeds x 8 sources; the test allows 4x and 2x that.
-    from core.hemicube import hemicube_rows
-    from core.patches import make_patches
-    from core.samples import room_with_boxes
 
-    pat = make_patches(room_with_boxes(150), 10.0)
+    pat = core_patches.make_patches(room_with_boxes(150), 10.0)
     p = pat.centres.shape[0]
     src = np.random.default_rng(0).choice(p, 8, replace=False)
     rows = exact_rows(pat, src, rays=16, rng=np.random.default_rng(1))
@@ -397,11 +397,8 @@ def test_hybrid_keeps_the_hemicube_row_sums_in_the_room():
     # Sum rule: conserve=True rescales far entries so each row sums like the hemicube's row
     # (identity to rounding). The ceiling patches over the luminaire (5 cm gap) are the case
     # where plain replacement overshoots: their rows exceed 1 without it.
-    from core.hemicube import hemicube_rows
-    from core.patches import make_patches
-    from core.samples import room_with_boxes
 
-    pat = make_patches(room_with_boxes(300), 10.0)
+    pat = core_patches.make_patches(room_with_boxes(300), 10.0)
     panel_centre = pat.centres[pat.material == 4].mean(axis=0)
     near_panel = np.linalg.norm(pat.centres[:, :2] - panel_centre[:2], axis=1) < 0.8
     ceiling = np.flatnonzero((pat.centres[:, 2] > 2.99) & near_panel)
@@ -451,8 +448,10 @@ def test_sources_out_of_range(pat):
 
 
 def test_sources_must_be_integers(pat):
-    with pytest.raises(ValueError, match="sources must be a 1-D array of integer node ids"):
+    with pytest.raises(TypeError, match="sources must hold integer node ids; got dtype float64"):
         exact_rows(pat, [0.5])
+    with pytest.raises(ValueError, match="sources must be a 1-D array of integer node ids"):
+        exact_rows(pat, [[0]])
 
 
 def test_rays_must_be_positive(pat):

@@ -5,6 +5,7 @@ import pytest
 
 from core.geometry import (corner_turns, newell_normals_areas, newell_vectors, plane_basis,
                            quads_convex, split_concave_quads, triangulate_polygon)
+from core.geometry import pairs_by_key
 
 #: Float64 rounding of sums of a few cross products of O(1) coordinates.
 TIGHT = 1e-12
@@ -182,7 +183,6 @@ def test_invalid_triangulation_points():
 
 
 def test_pairs_by_key_lists_every_ordered_pair_within_each_group():
-    from core.geometry import pairs_by_key
     keys = np.array([5, 2, 5, 9, 2, 5])
     i, j = pairs_by_key(keys)
     got = sorted(zip(i.tolist(), j.tolist()))

@@ -11,8 +11,13 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from bench import scenes as samples
+from core.constants import tol
 from core.hemicube import (FACE_NAMES, delta_form_factors, draw_polygons, hemicube_rows,
                            polygon_rows)
+from core.patches import patch_triangles
+
+from builders import box_quads, centred_square as square, quad_patches as make_patches
 
 #: Howell's catalogue (shared/reference/form_factors.md).
 CUBE_OPPOSITE = 0.199824895698
@@ -24,49 +29,6 @@ SIDE_SHARE = 0.1114683940
 # ------------------------------------------------------------------------------------------
 # Scene helpers and the independent oracle
 # ------------------------------------------------------------------------------------------
-
-def make_patches(corners):
-    """A Patches-like object from (P, 4, 3) corners (a triangle repeats its last corner)."""
-    corners = np.asarray(corners, dtype=float)
-    v = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]) \
-        + np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 0])
-    length = np.linalg.norm(v, axis=1)
-    return SimpleNamespace(corners=corners, centres=corners.mean(axis=1),
-                           normals=v / length[:, None], areas=0.5 * length)
-
-
-def square(cx, cy, z, size, facing_up=True):
-    """Axis-aligned square in the plane z, normal +z (or -z)."""
-    s = 0.5 * size
-    c = np.array([[cx - s, cy - s, z], [cx + s, cy - s, z], [cx + s, cy + s, z],
-                  [cx - s, cy + s, z]])
-    return c if facing_up else c[::-1]
-
-
-def box_quads(dims, cell):
-    """Closed box [0, dims], inward normals, conforming grid of about ``cell`` metres.
-
-    Returns corners (P, 4, 3) and the box face (0..5: x=0, x=max, y=0, y=max, z=0, z=max).
-    """
-    quads, face = [], []
-    for axis in range(3):
-        a, b = [k for k in range(3) if k != axis]
-        ga = np.linspace(0, dims[a], int(round(dims[a] / cell)) + 1)
-        gb = np.linspace(0, dims[b], int(round(dims[b] / cell)) + 1)
-        for side in (0, 1):
-            for i in range(ga.size - 1):
-                for j in range(gb.size - 1):
-                    q = np.zeros((4, 3))
-                    q[:, axis] = side * dims[axis]
-                    q[:, a] = [ga[i], ga[i + 1], ga[i + 1], ga[i]]
-                    q[:, b] = [gb[j], gb[j], gb[j + 1], gb[j + 1]]
-                    inward = 1 if side == 0 else -1
-                    if np.cross(q[1] - q[0], q[2] - q[0])[axis] * inward < 0:
-                        q = q[::-1]
-                    quads.append(q)
-                    face.append(2 * axis + side)
-    return np.array(quads), np.array(face)
-
 
 def clip_to_hemisphere(poly, point, normal):
     """Sutherland-Hodgman clip of a polygon (K, 3) to the half-space above a point's plane."""
@@ -464,15 +426,14 @@ def test_wall_crossing_or_touching_the_eye_plane_is_clipped(resolution, bottom):
 
 
 def test_geometry_nearer_than_the_near_plane_is_clipped():
-    # HEMICUBE_NEAR: along each face's axis, geometry nearer than near = HEMICUBE_NEAR x scene
-    # diagonal is cut away. A wall x = near / 3 beside the eye is then invisible through the
+    # Along each face's axis, geometry nearer than near = tol.hemicube_near x scene diagonal is
+    # cut away. A wall x = near / 3 beside the eye is then invisible through the
     # +x face (all of it is nearer than near along x). Through the top face (axis z) the ray
     # of column u meets it at z = x / u, kept while z >= near: 0 < u <= 1/3; through the
     # +y face (axis y, u = -x / y) at y = -x / u: -1/3 <= u < 0; the -y face mirrors it.
-    from core.constants import HEMICUBE_NEAR
     source = square(0, 0, 0, 0.01)
     diagonal = np.linalg.norm([0.01, 2.0, 2.0])                 # bounding box of the scene
-    wall_x = HEMICUBE_NEAR * diagonal / 3                       # inside the source's x extent
+    wall_x = tol.hemicube_near * diagonal / 3                       # inside the source's x extent
     wall = np.array([[wall_x, -1, -1], [wall_x, 1, -1], [wall_x, 1, 1], [wall_x, -1, 1]])[::-1]
     patches = make_patches([source, wall])
     rows = hemicube_rows(patches, [0], resolution=64)[0]
@@ -553,7 +514,6 @@ def test_quads_whole_cover_the_same_pixels_as_their_triangles():
     # With rotated hemicubes no pixel centre lies exactly on a box edge, so drawing a planar
     # quad whole or as two triangles must give the same rows, but for the odd pixel whose
     # centre ties two polygons at equal depth (at most a few pixels' delta form factor).
-    from core.patches import patch_triangles
     corners, _ = box_quads((1.0, 1.5, 2.0), 0.25)
     patches = make_patches(corners)
     p = len(corners)
@@ -575,7 +535,6 @@ def test_quads_whole_cover_the_same_pixels_as_their_triangles():
 def test_setup_cache_follows_the_patches_object():
     # hemicube_rows caches the per-scene setup of the last Patches object: alternating between
     # two scenes must give each its own rows, equal to an uncached computation.
-    samples = pytest.importorskip("core.samples")
     patches_mod = pytest.importorskip("core.patches")
     cube = patches_mod.make_patches(samples.unit_cube(n=2), max_edge=0.5)
     squares = patches_mod.make_patches(samples.opposed_squares(n=2), max_edge=0.5)
@@ -590,7 +549,6 @@ def test_setup_cache_follows_the_patches_object():
 
 
 def test_with_real_patches_of_a_sample_scene():
-    samples = pytest.importorskip("core.samples")
     patches_mod = pytest.importorskip("core.patches")
     scene = samples.unit_cube(n=3)
     patches = patches_mod.make_patches(scene, max_edge=0.5)
@@ -599,80 +557,3 @@ def test_with_real_patches_of_a_sample_scene():
     # Inward-facing closed cube: front nodes see everything, back nodes (outside) nothing.
     assert np.allclose(rows[:p].sum(axis=1), 1.0, atol=1e-12)
     assert rows[p:].sum() == 0
-
-
-def test_rows_do_not_depend_on_how_fragments_are_blocked(monkeypatch):
-    # Spans are drawn in blocks, _FRAG_SLOTS pixels per span at once (slots past a span get
-    # a negative key) and the rest of longer spans in a second pass. Blocks of 3 spans put
-    # block edges everywhere; the rows must be bit-identical, and closed-box rows still sum
-    # to 1 (a padding slot that wrote a pixel, or a lost fragment, would break one of both).
-    import core.hemicube as hemicube
-
-    corners, _ = box_quads((1.0, 1.0, 1.0), 0.25)
-    patches = make_patches(corners)
-    sources = np.arange(0, corners.shape[0], 7)
-    whole = hemicube_rows(patches, sources, resolution=32, rotate=True, rng=2)
-    monkeypatch.setattr(hemicube, "_FRAG_BLOCK", 3)
-    blocked = hemicube_rows(patches, sources, resolution=32, rotate=True, rng=2)
-    assert np.array_equal(whole, blocked)
-    assert np.allclose(whole.sum(axis=1), 1.0, atol=1e-12)
-
-
-def _room_with_furniture():
-    """A closed box with a floating slab: general (near-clipped) items and items drawn on
-    several faces at once, from every source."""
-    corners, _ = box_quads((1.0, 1.5, 1.0), 0.25)
-    slab = [square(0.5, 0.75, 0.4, 0.5), square(0.5, 0.75, 0.4, 0.5, facing_up=False)]
-    return make_patches(np.concatenate([corners, slab]))
-
-
-def test_rows_do_not_depend_on_how_items_are_blocked(monkeypatch):
-    # Items are set up and drawn _ITEM_BLOCK at a time, and the rest of long spans is held
-    # back until _FRAG_BLOCK of them wait; the item ids (and so the tie rule) do not depend on
-    # either. Tiny blocks put block edges everywhere, in the main, face and general groups.
-    import core.hemicube as hemicube
-
-    patches = _room_with_furniture()
-    sources = np.arange(0, patches.centres.shape[0], 5)
-    whole = hemicube_rows(patches, sources, resolution=32, rotate=True, rng=4)
-    monkeypatch.setattr(hemicube, "_ITEM_BLOCK", 7)
-    monkeypatch.setattr(hemicube, "_FRAG_BLOCK", 5)
-    blocked = hemicube_rows(patches, sources, resolution=32, rotate=True, rng=4)
-    assert np.array_equal(whole, blocked)
-    assert np.allclose(whole.sum(axis=1), 1.0, atol=1e-12)
-
-
-def test_polygons_beyond_a_face_are_dropped_only_when_clipping_would_drop_them(monkeypatch):
-    # Polygons straddling a face's near plane are first tested against the planes through the
-    # eye and the face's borders (with a margin) and clipped only if they may reach the face.
-    # Without that test (an infinite margin drops nothing) the rows must be the same.
-    import core.hemicube as hemicube
-
-    patches = _room_with_furniture()
-    sources = np.arange(patches.centres.shape[0])
-    fast = hemicube_rows(patches, sources, resolution=16)
-    monkeypatch.setattr(hemicube, "_PYRAMID_MARGIN", np.inf)
-    hemicube._CACHE.clear()
-    slow = hemicube_rows(patches, sources, resolution=16)
-    assert np.array_equal(fast, slow)
-
-
-def test_kept_buffers_do_not_leak_between_calls_or_threads():
-    # The z-buffer and the tiled delta form factors are kept per thread and reused: calls of
-    # other sizes and resolutions in between, or in other threads at the same time, must not
-    # change a result.
-    from concurrent.futures import ThreadPoolExecutor
-
-    patches = _room_with_furniture()
-    p = patches.centres.shape[0]
-    first = hemicube_rows(patches, np.arange(p), resolution=16)
-    hemicube_rows(patches, [0, 1, 2], resolution=32)
-    hemicube_rows(patches, np.arange(p // 2), resolution=16)
-    assert np.array_equal(hemicube_rows(patches, np.arange(p), resolution=16), first)
-    jobs = [(np.arange(p), 16), (np.arange(3), 32), (np.arange(p)[::-1], 16)] * 3
-    with ThreadPoolExecutor(max_workers=3) as pool:
-        results = list(pool.map(lambda job: hemicube_rows(patches, job[0], resolution=job[1]),
-                                jobs))
-    for (sources, resolution), rows in zip(jobs, results):
-        if resolution == 16:
-            assert np.array_equal(rows, first[sources])

@@ -3,13 +3,14 @@
 import numpy as np
 import pytest
 
-from core import SettingsError, samples, scene_from_polygons
+from bench import scenes as samples
+from core import SettingsError, scene_from_polygons
 from core.geometry import newell_vectors
-from core.patches import make_patches, patch_triangles, subdivide_patches
+from core.patches import _connected_labels, make_patches, patch_triangles, subdivide_patches
 
 #: Float64 rounding in sums of up to ~1e4 patch areas of O(1) size: 1e-12 relative leaves room.
 AREA_RTOL = 1e-12
-#: make_patches rounds ceil(length / max_edge) with 1e-9 relative slack (EDGE_COUNT_SLACK).
+#: make_patches rounds ceil(length / max_edge) with 1e-9 relative slack (tol.edge_count).
 EDGE_RTOL = 1e-9
 #: Distance (m) under which a point counts as lying on a segment: rounding of O(1) coordinates.
 ON_SEGMENT = 1e-12
@@ -428,7 +429,6 @@ def union_find_labels(n, a, b):
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_edge_classes_match_union_find(seed):
-    from core.patches import _connected_labels
     rng = np.random.default_rng(seed)
     n = 500
     a, b = rng.integers(0, n, 300), rng.integers(0, n, 300)

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from core.raycast import BVH, LEAF_SIZE, any_hit, build_bvh, closest_hit
+import core.raycast as rc
 
 
 def brute_force(tris, o, d, t_max):
@@ -47,7 +48,7 @@ def test_closest_hit_matches_brute_force(n_tri, seed):
     bvh = build_bvh(tris)
     t, tri = closest_hit(bvh, o, d, t_max)
     tb, trib = brute_force(tris, o, d, t_max)
-    # Random rays almost never graze an edge, where the slack BARY_EPS could matter: the
+    # Random rays almost never graze an edge, where the slack tol.barycentric could matter: the
     # winning triangle must agree exactly, t to rounding (same formula, different operand order).
     assert np.array_equal(tri, trib)
     np.testing.assert_allclose(t, tb, rtol=1e-12)
@@ -131,7 +132,6 @@ def test_parallel_axis_rays_with_zero_direction_components():
 
 
 def test_many_rays_cross_chunk_boundaries(monkeypatch):
-    import core.raycast as rc
     monkeypatch.setattr(rc, "RAY_CHUNK", 97)
     rng = np.random.default_rng(5)
     tris = random_scene(rng, 300)

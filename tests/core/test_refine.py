@@ -5,6 +5,7 @@ import importlib
 import numpy as np
 import pytest
 
+from builders import horizontal_square
 from core import BakeSettings, SettingsError, bake, scene_from_polygons
 from core.patches import make_patches
 from core.refine import refine_mask
@@ -13,12 +14,7 @@ bake_module = importlib.import_module("core.bake")
 
 
 def _plane(n=8, size=1.0):
-    t = np.linspace(0.0, size, n + 1)
-    xx, yy = np.meshgrid(t, t, indexing="ij")
-    verts = np.stack([xx.ravel(), yy.ravel(), np.zeros(xx.size)], axis=1)
-    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
-    quads = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 4)
-    return verts, quads.tolist()
+    return horizontal_square(0.0, size, n)
 
 
 def _plane_patches(n=8):

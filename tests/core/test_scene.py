@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from core import SceneError, make_scene, scene_from_polygons
-from core import samples
+from bench import scenes as samples
 
 SQUARE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
 RHO = [[0.5, 0.5, 0.5]]

@@ -3,9 +3,10 @@
 import numpy as np
 import pytest
 
+import core.progress as progress
+from bench.scenes import unit_cube
 from core.errors import BakeCancelled
 from core.progress import Monitor
-from core.samples import unit_cube
 from core.solvers import (SolveResult, ambient_radiance, solve_direct, solve_gauss_seidel,
                           solve_jacobi, solve_progressive)
 
@@ -270,7 +271,6 @@ def test_inputs_not_mutated(room):
 
 @pytest.mark.parametrize("solver", ["jacobi", "gauss_seidel", "progressive"])
 def test_progress_non_decreasing_and_cancel(room, solver, monkeypatch):
-    import core.progress as progress
     monkeypatch.setattr(progress, "POLL_INTERVAL", 0.0)   # poll at every opportunity
     F, areas, rho, le = _system(room)
     seen = []

@@ -1,4 +1,4 @@
-"""Procedural scenes for tests, benchmarks and the README example.
+"""Procedural scenes for tests, benchmarks and the README example (not shipped in the extension).
 
 Every builder returns a :class:`~core.scene.Scene`. Rectangles are meshed as grids of quads whose
 normals point into the room (walls) or out of the solid (boxes), counter-clockwise about the normal.
@@ -6,7 +6,10 @@ normals point into the room (walls) or out of the solid (boxes), counter-clockwi
 
 import numpy as np
 
-from .scene import make_scene
+try:  # inside the repository loaded as one package (scripts/make_cornell_box.py)
+    from ..core.scene import make_scene
+except ImportError:  # the repository root on sys.path (tests, bench, the README example)
+    from core.scene import make_scene
 
 #: Cornell box reflectances, RGB = band averages over 600-700, 500-596 and 400-496 nm of the
 #: published spectra (shared/reference/cornell_box.md).

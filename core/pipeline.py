@@ -1,0 +1,392 @@
+"""The stages of a bake, each a function that takes values and returns values.
+
+:func:`core.bake.bake` and :func:`core.bake.relight` call them in order::
+
+    nodes = node_arrays(scene, patches, two_sided)              # per-node materials and areas
+    ff = form_factors(patches, nodes, settings, monitor, kept)  # discovery: rows of active nodes
+    sol = solve(ff, nodes, settings, monitor)                   # radiance of every node
+    col = colours(scene, patches, sol.node_radiance, ...)       # corner colours
+    warnings, report = summary(...)
+
+Energy balance (report ``energy``, watts summed over RGB; power = pi x radiance x area):
+
+* ``emitted``  = pi sum_i A_i Le_i over the solved nodes;
+* ``absorbed`` = pi sum_i A_i (1 - rho_i) H_i with ``H_i = sum_j F_ij L_j`` the incident
+  radiance-equivalent of node i (``pi A_i H_i`` is the power arriving at i), plus the power that
+  lands on black back nodes (``two_sided=False``), ``pi sum_i A_i L_i F_ij`` over black j;
+* ``escaped``  = pi sum_i A_i L_i (1 - sum_j F_ij): the part of every row that hits nothing;
+* ``balance``  = emitted - absorbed - escaped. It is zero up to the solver residual when the form
+  factors are reciprocal (``A_i F_ij = A_j F_ji``); a hemicube's reciprocity error shows here too.
+  (Matrix-free progressive: the shooting bookkeeping, where balance = the unshot power.)
+"""
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from .colours import corner_colours
+from .elements import make_elements
+from .gather import corner_groups, gather_rows, gathered_colours
+from .progress import SubMonitor
+from .reciprocity import asymmetry, make_reciprocal
+from .rows import Batcher, RowStore, discover, row_function, row_seconds
+from .solvers import (matvec, solve_direct, solve_gauss_seidel, solve_jacobi,
+                      solve_progressive)
+
+#: 'auto' solves directly (LU, exact) up to this many active nodes, block Gauss-Seidel above.
+#: Measured on room_with_boxes (bench/bench_solvers.py, 2 shared cores): 548 nodes direct
+#: 0.27 s vs Gauss-Seidel 0.08 s; 2148 nodes direct 1.4 s vs 0.11-0.3 s. Below ~1000 nodes
+#: the direct solve costs well under a second and leaves no iteration error.
+AUTO_DIRECT_MAX_NODES = 1000
+
+#: Progressive shooters per step are capped here (and by the measured batch speed).
+MAX_SHOOT_BATCH = 64
+
+#: A face is reported as lit from behind when its back side receives more than this times the
+#: power its front side receives (1: "more light on the back").
+BACKLIGHT_RATIO = 1.0
+
+#: The report warns when |emitted - absorbed - escaped| exceeds this fraction of the emitted
+#: power. With a converged solve the imbalance is the reciprocity error of the form factors,
+#: which a hemicube makes large where surfaces are nearer than about a patch size.
+ENERGY_WARN_FRACTION = 0.05
+
+#: Share of the colours stage's progress given to the element gathers (they take about a third
+#: of the vertex gather's time on the office sample).
+ELEMENT_SHARE = 0.3
+
+
+@dataclass(frozen=True)
+class Nodes:
+    """Per-node arrays of a bake: front node p, back node p + P.
+
+    Attributes
+    ----------
+    rho, le : (2P, 3) float64
+        Reflectance and emitted radiance.
+    areas : (2P,) float64
+    allowed : (2P,) bool
+        Nodes that may become active (back nodes are black when ``two_sided=False``).
+    """
+
+    rho: np.ndarray
+    le: np.ndarray
+    areas: np.ndarray
+    allowed: np.ndarray
+
+    @property
+    def emitting(self):
+        """(E,) int64: allowed nodes that emit."""
+        return np.flatnonzero(np.any(self.le > 0, axis=1) & self.allowed)
+
+
+def node_arrays(scene, patches, two_sided):
+    """Per-node reflectance, emission, areas and the nodes allowed to be active (:class:`Nodes`)."""
+    P = len(patches.areas)
+    rho = np.asarray(scene.reflectance, dtype=np.float64)[patches.material]
+    le = np.asarray(scene.emission, dtype=np.float64)[patches.material]
+    if two_sided:
+        back_rho, back_le = scene.back_materials()
+        rho_n = np.concatenate([rho, np.asarray(back_rho, dtype=np.float64)[patches.material]])
+        le_n = np.concatenate([le, np.asarray(back_le, dtype=np.float64)[patches.material]])
+    else:
+        rho_n = np.concatenate([rho, np.zeros_like(rho)])
+        le_n = np.concatenate([le, np.zeros_like(le)])
+    areas = np.concatenate([patches.areas, patches.areas]).astype(np.float64)
+    allowed = np.ones(2 * P, dtype=bool)
+    if not two_sided:
+        allowed[P:] = False
+    return Nodes(rho_n, le_n, areas, allowed)
+
+
+@dataclass(frozen=True)
+class FormFactors:
+    """Outcome of :func:`form_factors`: the kept rows and what discovery found.
+
+    Attributes
+    ----------
+    store : core.rows.RowStore
+        Rows of every active node (a new store: the one handed in is left as it was).
+    active : (2P,) bool
+    overflow : bool
+        The rows outgrew ``memory_budget``: discovery stopped, the solve runs matrix-free.
+    rows_fn : callable
+        Computes more rows (the matrix-free solve needs them on demand).
+    batch : int
+        The batch size discovery reached.
+    """
+
+    store: RowStore
+    active: np.ndarray
+    overflow: bool
+    rows_fn: object
+    batch: int
+
+
+def form_factors(patches, nodes, settings, monitor, store=None, active=None):
+    """Discovery from the emitters (only from new ones when ``store`` holds a bake's rows)."""
+    P = len(patches.areas)
+    N = 2 * P
+    rng = np.random.default_rng(settings.seed)
+    if store is not None:
+        # Rows for nodes not reached before: a separate stream, so kept rows stay as they were.
+        rng = np.random.default_rng([settings.seed, 1])
+    rows_fn = row_function(patches, settings.method, settings.resolution,
+                           settings.rotate_hemicube, rng, settings.rays, settings.near)
+    batcher = Batcher(N, row_seconds(patches, settings.method, settings.resolution,
+                                     settings.rays))
+    if store is None:
+        store = RowStore(N, N)
+        active = np.zeros(N, dtype=bool)
+    else:
+        store = store.copy()
+    emitting = nodes.emitting
+    frontier = emitting[~active[emitting]]
+    active, overflow = discover(store, rows_fn, nodes.allowed, active, frontier, monitor,
+                                settings.memory_budget, batcher)
+    # Every front node is solved: it is what the user sees and what gets baked, and a small
+    # patch can slip between the pixels of every hemicube that looks at it, so "hit by an
+    # active row" alone would leave it black. What these late rows hit is not added: a node
+    # that only unlit nodes see (the inside of a box, seen from the floor under it) stays out.
+    late = np.flatnonzero(~active[:P])
+    if len(late) and not overflow:
+        active, overflow = discover(store, rows_fn, nodes.allowed, active, late, monitor,
+                                    settings.memory_budget, batcher, expand=False)
+    return FormFactors(store, active, overflow, rows_fn, batcher.size)
+
+
+def choose_solver(settings, n_active, overflow):
+    """(solver name, warnings): 'progressive_free' when the dense matrix would not fit."""
+    budget = settings.memory_budget
+    mib = budget / 2**20
+    if overflow:
+        return "progressive_free", [
+            f"form factors of the reachable nodes exceed memory_budget ({mib:.0f} MiB): used "
+            "matrix-free progressive refinement (rows recomputed on demand, slower)"]
+    solver = settings.solver
+    if solver == "auto":
+        if n_active <= AUTO_DIRECT_MAX_NODES and 8 * n_active * n_active <= budget:
+            return "direct", []
+        if 4 * n_active * n_active <= budget:
+            return "gauss_seidel", []
+        return "progressive_free", [
+            f"the form factors of {n_active} nodes need {4 * n_active * n_active / 2**20:.0f} "
+            f"MiB, over memory_budget ({mib:.0f} MiB): used matrix-free progressive refinement "
+            "(rows recomputed on demand, slower)"]
+    need = (8 if solver == "direct" else 4) * n_active * n_active
+    if need > budget:
+        return "progressive_free", [
+            f"solver '{solver}' needs {need / 2**20:.0f} MiB of form factors for {n_active} "
+            f"nodes, over memory_budget ({mib:.0f} MiB): used matrix-free progressive "
+            "refinement instead"]
+    return solver, []
+
+
+@dataclass(frozen=True)
+class Solution:
+    """Outcome of :func:`solve`.
+
+    Attributes
+    ----------
+    node_radiance : (2P, 3) float64
+        Zero for nodes never reached.
+    result : core.solvers.SolveResult
+    solver : str
+        The solver that ran.
+    active : (2P,) bool
+        The solved nodes (after a matrix-free solve: those that emit or receive light).
+    incident : (2P, 3) float64
+        Power arriving at every node / pi (radiance x area).
+    energy_rgb : tuple of three (3,) arrays
+        Emitted, absorbed, escaped (radiance x area, before the factor pi).
+    reciprocity : dict
+    matrix_bytes : int
+    store : core.rows.RowStore or None
+        Rows kept for relight (None after a matrix-free solve).
+    warnings : list of str
+    """
+
+    node_radiance: np.ndarray
+    result: object
+    solver: str
+    active: np.ndarray
+    incident: np.ndarray
+    energy_rgb: tuple
+    reciprocity: dict
+    matrix_bytes: int
+    store: object
+    warnings: list
+
+
+def solve(ff, nodes, settings, monitor):
+    """Solve the radiosity system of the active nodes (dense, or matrix-free if too big)."""
+    idx = np.flatnonzero(ff.active)
+    solver, warnings = choose_solver(settings, len(idx), ff.overflow)
+    if solver == "progressive_free":
+        sol = _solve_matrix_free(ff, nodes, settings, monitor)
+    else:
+        sol = _solve_dense(ff, nodes, settings, solver, monitor)
+    if not sol.result.converged:
+        r = sol.result
+        warnings.append(f"solver '{r.solver}' stopped after {r.iterations} iterations at "
+                        f"residual {r.residual:.3g} > tolerance {settings.tolerance:g}")
+    return dataclasses.replace(sol, warnings=warnings + sol.warnings)
+
+
+def _solve_dense(ff, nodes, settings, solver, monitor):
+    store, rho, le, areas = ff.store, nodes.rho, nodes.le, nodes.areas
+    N = len(areas)
+    idx = np.flatnonzero(ff.active)
+    n_a = len(idx)
+    dtype = np.float64 if solver == "direct" else np.float32
+    F = store.assemble(idx, idx, dtype, monitor)
+    use_recip = settings.reciprocity
+    if use_recip == "auto":
+        use_recip = settings.method == "hemicube"
+    if use_recip:
+        F, recip = make_reciprocal(F, areas[idx], monitor=monitor)
+    else:
+        recip = dict(asymmetry_before=asymmetry(F, areas[idx], monitor), sinkhorn_iterations=0)
+    black = np.flatnonzero(store.hit() & ~nodes.allowed)   # black back nodes that light reaches
+    black_block = store.assemble(idx, black, np.float32, monitor) if len(black) else None
+    matrix_bytes = F.nbytes + (black_block.nbytes if black_block is not None else 0)
+    common = dict(tol=settings.tolerance, monitor=monitor)
+    if solver == "direct":
+        res = solve_direct(F, rho[idx], le[idx], monitor=monitor)
+    elif solver == "jacobi":
+        res = solve_jacobi(F, rho[idx], le[idx], max_iterations=settings.max_iterations,
+                           **common)
+    elif solver == "gauss_seidel":
+        res = solve_gauss_seidel(F, rho[idx], le[idx], max_iterations=settings.max_iterations,
+                                 **common)
+    else:
+        res = solve_progressive(None, areas[idx], rho[idx], le[idx], F=F,
+                                max_shots=settings.max_iterations * max(n_a, 1), **common)
+    L = res.radiance
+    node_radiance = np.zeros((N, 3))
+    node_radiance[idx] = L
+    # incident power per node (radiance x area), for the energy balance and the warnings
+    H = np.zeros((N, 3))
+    H[idx] = matvec(F, L)
+    incident = H * areas[:, None]
+    sent = areas[idx, None] * L                              # (n_a, 3)
+    if black_block is not None:
+        incident[black] = black_block.T.astype(np.float64) @ sent
+    escaped = ((1.0 - store.row_sums[idx])[:, None] * sent).sum(axis=0)
+    absorbed = ((1.0 - rho) * incident).sum(axis=0)
+    emitted = (le[idx] * areas[idx, None]).sum(axis=0)
+    return Solution(node_radiance, res, solver, ff.active, incident,
+                    (emitted, absorbed, escaped), recip, int(matrix_bytes), store, [])
+
+
+def _solve_matrix_free(ff, nodes, settings, monitor):
+    store, rows_fn = ff.store, ff.rows_fn
+    N = len(nodes.areas)
+
+    def rows_on_demand(keys):
+        out = np.empty((len(keys), N))
+        have = store.has(keys)
+        if have.any():
+            out[have] = store.rows(keys[have])
+        if (~have).any():
+            out[~have] = rows_fn(keys[~have])
+        return out
+
+    recip = dict(asymmetry_before=None, sinkhorn_iterations=0,
+                 note="matrix-free shooting conserves energy by construction")
+    res = solve_progressive(rows_on_demand, nodes.areas, nodes.rho, nodes.le,
+                            tol=settings.tolerance, max_shots=settings.max_iterations * N,
+                            batch=int(np.clip(ff.batch, 1, MAX_SHOOT_BATCH)), monitor=monitor)
+    st = res.stats
+    incident = st["incident"]
+    active = np.any(incident > 0, axis=1) | np.any(nodes.le > 0, axis=1)
+    return Solution(res.radiance, res, "progressive", active, incident,
+                    (st["emitted"], st["absorbed"], st["escaped"]), recip, int(store.nbytes),
+                    None, [])
+
+
+@dataclass(frozen=True)
+class Gather:
+    """What the final gather keeps for relight: corner groups, their rows, receiver elements."""
+
+    groups: object
+    rows: RowStore
+    elements: object
+
+
+def make_gather(scene, patches, node_radiance, settings, monitor, on_contact=None):
+    """Receiver elements (if ``element_levels``) and the gather rows at every corner group."""
+    elements = None
+    seen = patches
+    if settings.element_levels:
+        elements = make_elements(
+            scene, patches, node_radiance, levels=settings.element_levels,
+            threshold=settings.element_threshold, crease_angle=settings.crease_angle,
+            resolution=settings.resolution, rotate=settings.rotate_hemicube,
+            rng=np.random.default_rng([settings.seed, 3]),
+            monitor=SubMonitor(monitor, 0.0, ELEMENT_SHARE))
+        seen = elements.patches
+    groups = corner_groups(scene, crease_angle=settings.crease_angle, on_contact=on_contact)
+    sub = SubMonitor(monitor, ELEMENT_SHARE if elements is not None else 0.0, 1.0)
+    rows = gather_rows(seen, groups, resolution=settings.resolution,
+                       rotate=settings.rotate_hemicube,
+                       rng=np.random.default_rng([settings.seed, 2]), monitor=sub)
+    return Gather(groups, rows, elements)
+
+
+def colours(scene, patches, node_radiance, settings, gather):
+    """Corner colours (C, 3) and the elements' report (or None).
+
+    ``gather`` (:class:`Gather`) is needed for ``corners='gather'``; ignored for 'average'.
+    """
+    P = len(patches.areas)
+    patch_radiance = node_radiance[:P]
+    if settings.corners != "gather":
+        return corner_colours(scene, patches, patch_radiance,
+                              crease_angle=settings.crease_angle), None
+    element_report = None
+    seen_radiance = node_radiance
+    if gather.elements is not None:
+        elements = gather.elements
+        seen_radiance = elements.node_radiance(scene, node_radiance)
+        element_report = dict(elements=int(elements.parent.size),
+                              gathered=int(elements.computed.size), levels=elements.levels)
+    # The patch average only fills the corners of dropped faces, which have no gather.
+    fallback = np.zeros((scene.n_corners, 3))
+    if np.any(gather.groups.group < 0):
+        fallback = corner_colours(scene, patches, patch_radiance,
+                                  crease_angle=settings.crease_angle)
+    return gathered_colours(scene, gather.groups, gather.rows, seen_radiance, fallback), \
+        element_report
+
+
+def check_result(scene, patches, sol):
+    """Warnings about the scene and the energy balance, and the balance in watts (dict)."""
+    warnings = []
+    n_dropped = int(np.count_nonzero(~np.asarray(scene.face_valid)))
+    if n_dropped:
+        warnings.append(f"{n_dropped} degenerate faces (zero area) were dropped")
+    n_back = faces_lit_from_behind(patches, sol.incident, scene.emission)
+    if n_back:
+        warnings.append(f"{n_back} faces receive more light on their back side: check normals")
+    emitted, absorbed, escaped = (float(np.pi * x.sum()) for x in sol.energy_rgb)
+    balance = emitted - absorbed - escaped
+    if emitted > 0 and abs(balance) > ENERGY_WARN_FRACTION * emitted:
+        warnings.append(f"energy balance off by {100 * balance / emitted:+.1f} % of the emitted "
+                        "power: the form factors are not reciprocal (surfaces nearer than about "
+                        "a patch size?); try method='hybrid' or a smaller patch_size")
+    energy = dict(emitted=emitted, absorbed=absorbed, escaped=escaped, balance=balance)
+    return warnings, energy, n_dropped
+
+
+def faces_lit_from_behind(patches, incident, emission):
+    """Number of non-emitting faces whose back nodes receive more power than their front nodes."""
+    P = len(patches.areas)
+    power = incident.sum(axis=1)
+    n_faces = len(patches.face_patch_start) - 1
+    front = np.bincount(patches.face, weights=power[:P], minlength=n_faces)
+    back = np.bincount(patches.face, weights=power[P:], minlength=n_faces)
+    emits = np.zeros(n_faces, dtype=bool)
+    emits[patches.face[np.any(np.asarray(emission)[patches.material] > 0, axis=1)]] = True
+    return int(np.count_nonzero((back > BACKLIGHT_RATIO * front) & (back > 0) & ~emits))

@@ -1,0 +1,156 @@
+"""Reciprocal form factors: blend each pair's two estimates, then restore the row sums.
+
+A hemicube (or ray) row is a point-source estimate from its own patch: two near patches of
+different sizes disagree about their exchange, and the energy balance shows it.
+:func:`make_reciprocal` makes ``A_i F_ij = A_j F_ji`` exact while keeping every row's sum
+(symmetric Sinkhorn scaling), so a closed scene still passes the white furnace test.
+
+Every block loop polls the monitor, so a cancel is honoured within a poll interval even on a
+matrix of thousands of nodes.
+"""
+
+import numpy as np
+
+from .progress import poll
+
+#: Sinkhorn scaling of make_reciprocal stops when every row sum is within this relative
+#: error of its target: ten times below the default solver tolerance, so the energy balance it
+#: buys is not lost, and reached in ~100 sweeps on room_with_boxes(2000) (1e-6 took 258).
+RECIPROCITY_TOL = 1e-5
+RECIPROCITY_MAX_ITERATIONS = 500
+#: A node whose row sum is still off by more than this after the Sinkhorn iterations cannot be
+#: balanced with the others (see make_reciprocal) and keeps its own row and column.
+SINKHORN_FAIL = 1e-3
+#: Sinkhorn scales stay within this factor of their starting value.
+SINKHORN_RANGE = 1e4
+#: Passes of make_reciprocal's Sinkhorn scaling, each dropping the nodes found unbalanceable.
+SINKHORN_PASSES = 6
+_BLOCK = 1024
+
+
+def asymmetry(F, areas, monitor=None):
+    """Area-weighted relative reciprocity error sum|A_i F_ij - A_j F_ji| / sum(A_i F_ij)."""
+    num = 0.0
+    den = 0.0
+    for s in range(0, F.shape[0], _BLOCK):
+        e = min(s + _BLOCK, F.shape[0])
+        g = areas[s:e, None] * F[s:e].astype(np.float64)
+        poll(monitor, "making form factors reciprocal")
+        gt = F[:, s:e].T.astype(np.float64) * areas[None, :]
+        num += float(np.abs(g - gt).sum())
+        den += float(g.sum())
+        poll(monitor, "making form factors reciprocal")
+    return num / den if den > 0 else 0.0
+
+
+def make_reciprocal(F, areas, *, tol=RECIPROCITY_TOL, max_iterations=RECIPROCITY_MAX_ITERATIONS,
+                    monitor=None):
+    """Reciprocal form factors with the row sums of ``F``.
+
+    Each pair has two estimates of its exchange ``A_i F_ij``: one from i's hemicube (or rays),
+    one from j's. A point-source estimate is good when its own patch is small compared with the
+    distance, so they are blended with weights favouring the smaller patch:
+    ``S_ij = (A_j A_i F_ij + A_i A_j F_ji) / (A_i + A_j)``, symmetric by construction. Then a
+    symmetric Sinkhorn scaling ``D S D`` restores every row's own sum (the fraction of i's
+    energy that lands on these nodes), so a closed scene keeps rows summing to 1 (white furnace
+    exact) and the energy balance holds to solver precision.
+
+    Parameters
+    ----------
+    F : (n, n) float32 or float64
+        Form factors among one set of nodes; row i = what node i sees.
+    areas : (n,) float64
+        Node areas (> 0).
+
+    Returns
+    -------
+    F_rec : (n, n), dtype of F
+        ``areas[:, None] * F_rec`` is symmetric, ``F_rec.sum(1) == F.sum(1)`` within ``tol``.
+    info : dict
+        ``asymmetry_before`` (see :func:`asymmetry`), ``sinkhorn_iterations`` (of the last
+        pass), ``row_sum_error`` (largest relative error left), ``unscaled`` (nodes left with
+        their own rows and columns).
+    """
+    F = np.asarray(F)
+    areas = np.asarray(areas, dtype=np.float64)
+    n = F.shape[0]
+    if F.ndim != 2 or F.shape[1] != n:
+        raise ValueError(f"F must be square (n, n); got {F.shape}")
+    if areas.shape != (n,) or not np.all(areas > 0):
+        raise ValueError(f"areas must have shape ({n},) and be > 0; got {areas.shape}")
+    info = dict(asymmetry_before=asymmetry(F, areas, monitor))
+    row_sum = F.sum(axis=1, dtype=np.float64)
+    target = areas * row_sum
+    S = np.empty_like(F)
+    a = areas.astype(F.dtype)
+    for s in range(0, n, _BLOCK):
+        e = min(s + _BLOCK, n)
+        ai = a[s:e, None]
+        S[s:e] = ai * a[None, :] * (F[s:e] + F[:, s:e].T) / (ai + a[None, :])
+        poll(monitor, "making form factors reciprocal")
+    # Nodes that cannot be balanced keep their own rows and columns: nodes without a partner
+    # (their row hits only nodes that see nothing), and groups whose row sums cannot all be met by
+    # a symmetric scaling: two sets of patches shut inside a solid, each seeing mostly through the
+    # near walls and the other set only a little, have no solution (their scales diverge). A pass
+    # that finds such nodes drops them, and the next balances the rest without them.
+    unscaled = np.zeros(n, dtype=bool)
+    for attempt in range(1, SINKHORN_PASSES + 1):
+        live = (target > 0) & ~unscaled
+        while True:
+            partnered = live & (S @ live.astype(S.dtype) > 0)
+            poll(monitor, "making form factors reciprocal")
+            if np.array_equal(partnered, live):
+                break
+            live = partnered
+        unscaled |= (target > 0) & ~live
+        d, it, err, pinned = _sinkhorn(S, target, live, tol, max_iterations, monitor)
+        failed = pinned if pinned.any() else live & ~(err <= SINKHORN_FAIL)
+        if attempt == SINKHORN_PASSES or not failed.any():
+            break
+        unscaled |= failed
+        idx = np.flatnonzero(unscaled)
+        S[idx] = 0
+        S[:, idx] = 0
+        target = areas * (row_sum - F[:, idx].sum(axis=1, dtype=np.float64))
+        target[idx] = 0.0
+    for s in range(0, n, _BLOCK):
+        e = min(s + _BLOCK, n)
+        S[s:e] *= (d[s:e] / areas[s:e])[:, None].astype(S.dtype) * d[None, :].astype(S.dtype)
+        poll(monitor, "making form factors reciprocal")
+    idx = np.flatnonzero(unscaled)
+    if idx.size:
+        S[idx] = F[idx]
+        S[:, idx] = F[:, idx]
+    err = float(np.max(err[live])) if live.any() else 0.0
+    info.update(sinkhorn_iterations=it, row_sum_error=err, unscaled=int(idx.size))
+    return S, info
+
+
+def _sinkhorn(S, target, live, tol, max_iterations, monitor):
+    """Symmetric Sinkhorn: d with ``d_i sum_j S_ij d_j = target_i`` over the live nodes.
+
+    Returns (d, iterations, relative row error per node, pinned). Scales are held within
+    ``SINKHORN_RANGE`` of their start, so that a group without a solution stays finite instead of
+    overflowing into every row through the product; the iteration stops as soon as a scale
+    reaches that bound, and ``pinned`` marks the nodes that did.
+    """
+    n = S.shape[0]
+    d = np.zeros(n)
+    rs = S.sum(axis=1, dtype=np.float64)
+    d[live] = np.sqrt(target[live] / rs[live])
+    lo, hi = d / SINKHORN_RANGE, d * SINKHORN_RANGE
+    err = np.zeros(n)
+    it = 0
+    safe = np.where(live, target, 1.0)
+    for it in range(1, max_iterations + 1):
+        r = d * (S @ d.astype(S.dtype)).astype(np.float64)
+        err = np.where(live, np.abs(r - target) / safe, 0.0)
+        if float(err.max(initial=0.0)) <= tol:
+            break
+        ok = live & (r > 0)
+        d[ok] = np.clip(d[ok] * np.sqrt(target[ok] / r[ok]), lo[ok], hi[ok])
+        pinned = ok & ((d <= lo) | (d >= hi))
+        if pinned.any():
+            return d, it, err, pinned
+        poll(monitor, "making form factors reciprocal")
+    return d, it, err, np.zeros(n, dtype=bool)

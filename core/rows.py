@@ -1,0 +1,273 @@
+"""Form-factor rows: how they are computed (per method, in deterministic batches) and kept.
+
+A *row* is what one receiver sees: the fraction of its view (or of its energy, for a patch node)
+that lands on each of the 2P nodes. Rows are kept compact in a :class:`RowStore` (per batch, only
+the columns it hit, in float32): the node rows of a bake, from which the dense matrix of the
+active nodes is assembled, and the point rows of the final gather (vertices, receiver elements).
+
+Discovery (:func:`discover`) computes node rows wave by wave from the emitters: every node an
+active row hits becomes active, so only the nodes light can reach are ever solved.
+"""
+
+import numpy as np
+
+from .errors import SettingsError
+from .exact import exact_rows, hybrid_rows, ray_triangles
+from .hemicube import hemicube_rows
+from .progress import Monitor, poll
+from .raycast import build_bvh
+from .settings import METHODS, BY_NAME
+
+#: Form-factor batches are sized for about this much work, so that progress and cancel are
+#: polled well within half a second (the first batches are smaller still: 1, 4, 16, ...).
+BATCH_SECONDS = 0.15
+
+#: Cost model of one form-factor row (seconds, 2 shared cores), used to size batches. Batch
+#: sizes must not depend on measured time: the random draws of a batch (hemicube rotations,
+#: visibility rays) depend on its composition, and the bake must be deterministic given
+#: ``seed``. Fitted on room_with_boxes at R = 64 (bench/bench_solvers.py): 2.0 ms per row at
+#: 1000 triangles, 4.1 ms at 4000, 17.6 ms at 16000; 'exact' 0.18 s per row at 490 patches
+#: with 16 rays; 'hybrid' about 3 hemicubes.
+ROW_SECONDS_PER_PIXEL = 2.5e-7
+ROW_SECONDS_PER_TRIANGLE = 1.0e-6
+ROW_SECONDS_PER_PAIR_RAY = 2.3e-5
+HYBRID_COST_FACTOR = 3.0
+
+#: A batch never holds more than this many float64 row entries (S x 2P): 64 MB.
+MAX_BATCH_ENTRIES = 8_000_000
+
+#: Cap on sources per form-factor batch, and growth factor of the first batches.
+MAX_BATCH_SOURCES = 1024
+BATCH_GROWTH = 4
+
+_METHOD_NAMES = tuple(c.value for c in METHODS)
+
+
+def compact_rows(rows):
+    """(cols (K,), vals (S, K) float32): the columns of ``rows`` (S, n) that any row hits."""
+    cols = np.flatnonzero(np.any(rows > 0, axis=0))
+    return cols, rows[:, cols].astype(np.float32)
+
+
+class RowStore:
+    """Rows computed so far, compact: per batch, its row keys, the columns it hit and the values.
+
+    Parameters
+    ----------
+    n_rows : int
+        Row keys are in [0, n_rows): node ids of a bake's rows, or gather-point ids.
+    n_cols : int
+        Columns of a full row (2P nodes).
+
+    A bake's node store is never edited once handed on: :meth:`copy` shares the old batches.
+    """
+
+    def __init__(self, n_rows, n_cols):
+        self.n_rows, self.n_cols = n_rows, n_cols
+        self.batches = []                          # (keys (S,), cols (K,), vals (S, K) f32)
+        self.row_sums = np.full(n_rows, np.nan)    # full row sum of every computed row
+        self.where = np.full((n_rows, 2), -1, dtype=np.int64)   # (batch, row) of each key
+        self.nbytes = 0
+
+    def copy(self):
+        new = RowStore(self.n_rows, self.n_cols)
+        new.batches = list(self.batches)
+        new.row_sums = self.row_sums.copy()
+        new.where = self.where.copy()
+        new.nbytes = self.nbytes
+        return new
+
+    def add(self, keys, rows):
+        """Keep ``rows`` (S, n_cols) of ``keys`` (S,), compacted; returns the columns hit (K,)."""
+        cols, vals = compact_rows(rows)
+        self.add_compact(keys, cols, vals, rows.sum(axis=1))
+        return cols
+
+    def add_compact(self, keys, cols, vals, row_sums=None):
+        """Keep rows already compacted by :func:`compact_rows` (row sums: of ``vals`` if None)."""
+        b = len(self.batches)
+        self.batches.append((keys, cols, vals))
+        self.row_sums[keys] = vals.sum(axis=1, dtype=np.float64) if row_sums is None \
+            else row_sums
+        self.where[keys, 0] = b
+        self.where[keys, 1] = np.arange(len(keys))
+        self.nbytes += vals.nbytes + cols.nbytes + keys.nbytes
+
+    def n_stored(self):
+        """Number of keys with a stored row."""
+        return int(np.count_nonzero(self.where[:, 0] >= 0))
+
+    def hit(self):
+        """(n_cols,) bool: columns hit by any stored row."""
+        out = np.zeros(self.n_cols, dtype=bool)
+        for _, cols, _ in self.batches:
+            out[cols] = True
+        return out
+
+    def has(self, keys):
+        return self.where[keys, 0] >= 0
+
+    def rows(self, keys):
+        """Dense (len(keys), n_cols) float64 rows of stored keys."""
+        out = np.zeros((len(keys), self.n_cols))
+        bs = self.where[keys, 0]
+        for b in np.unique(bs):
+            sel = np.flatnonzero(bs == b)
+            _, cols, vals = self.batches[b]
+            out[np.ix_(sel, cols)] = vals[self.where[keys[sel], 1]]
+        return out
+
+    def incident(self, node_radiance):
+        """(n_rows, 3): ``sum_j F(key -> j) L_j`` for every stored row (zero elsewhere)."""
+        out = np.zeros((self.n_rows, 3))
+        L = np.asarray(node_radiance, dtype=np.float64)
+        for keys, cols, vals in self.batches:
+            out[keys] = vals.astype(np.float64) @ L[cols]
+        return out
+
+    def assemble(self, row_keys, col_nodes, dtype, monitor=None):
+        """Dense block F[row_keys][:, col_nodes] from the stored rows (all must be stored).
+
+        ``monitor`` is polled between batches (cancel within a poll interval).
+        """
+        pos_r = np.full(self.n_rows, -1, dtype=np.int64)
+        pos_r[row_keys] = np.arange(len(row_keys))
+        pos_c = np.full(self.n_cols, -1, dtype=np.int64)
+        pos_c[col_nodes] = np.arange(len(col_nodes))
+        out = np.zeros((len(row_keys), len(col_nodes)), dtype=dtype)
+        for keys, cols, vals in self.batches:
+            r = pos_r[keys]
+            rk = r >= 0
+            c = pos_c[cols]
+            ck = c >= 0
+            if rk.any() and ck.any():
+                out[np.ix_(r[rk], c[ck])] = vals[np.ix_(rk, ck)]
+            poll(monitor, "assembling form factors")
+        return out
+
+
+def row_function(patches, method, resolution, rotate, rng, rays, near=BY_NAME["near"].default):
+    """Return rows(sources (S,) int64) -> (S, 2P) float64 for the chosen method."""
+    if method == "hemicube":
+        def rows(sources):
+            return hemicube_rows(patches, sources, resolution=resolution, rotate=rotate, rng=rng)
+        return rows
+    if method not in _METHOD_NAMES:
+        raise SettingsError(f"method must be one of {_METHOD_NAMES}; got {method!r}")
+    bvh = build_bvh(ray_triangles(patches)[0])
+    if method == "exact":
+        # The exact method is the reference: integrate over the source patch too (adaptive
+        # Gauss order), not just its centre, or it keeps the hemicube's point-source error.
+        def rows(sources):
+            return exact_rows(patches, sources, rays=rays, rng=rng, bvh=bvh,
+                              source_order="adaptive")
+        return rows
+
+    def rows(sources):
+        return hybrid_rows(patches, sources, resolution=resolution, rays=rays, rng=rng,
+                           bvh=bvh, rotate=rotate, near=near)
+    return rows
+
+
+def row_seconds(patches, method, resolution, rays):
+    """Estimated seconds for one form-factor row (see ROW_SECONDS_PER_*)."""
+    n_tri = 2 * len(patches.areas)                  # quads -> 2 triangles (upper bound)
+    hemi = ROW_SECONDS_PER_PIXEL * resolution ** 2 + ROW_SECONDS_PER_TRIANGLE * n_tri
+    if method == "hemicube":
+        return hemi
+    if method == "hybrid":
+        return HYBRID_COST_FACTOR * hemi
+    return ROW_SECONDS_PER_PAIR_RAY * len(patches.areas) * rays
+
+
+class Batcher:
+    """Deterministic batch sizes: 1, 4, 16, ... up to about BATCH_SECONDS of estimated work."""
+
+    def __init__(self, n_nodes, row_seconds):
+        cap = max(1, min(MAX_BATCH_SOURCES, MAX_BATCH_ENTRIES // max(n_nodes, 1)))
+        self.full = int(np.clip(BATCH_SECONDS / max(row_seconds, 1e-9), 1, cap))
+        self.size = 1
+
+    def rows(self, fn, sources):
+        """``fn(sources)``, then grow the next batch (up to ``full``)."""
+        out = fn(sources)
+        self.size = min(self.full, self.size * BATCH_GROWTH)
+        return out
+
+
+def form_factor_matrix(patches, *, method="hemicube", resolution=64, rotate=False, rng=None,
+                       rays=16, monitor=None):
+    """Dense form factors between all 2P nodes (tests and small scenes).
+
+    Parameters
+    ----------
+    patches : core.patches.Patches
+    method : {'hemicube', 'exact', 'hybrid'}
+    resolution : int
+        Hemicube resolution.
+    rotate : bool
+        Random hemicube rotations (from ``rng``).
+    rng : numpy.random.Generator, optional
+        Default: ``np.random.default_rng(0)``.
+    rays : int
+        Visibility rays per pair ('exact', 'hybrid').
+    monitor : core.progress.Monitor, optional
+
+    Returns
+    -------
+    (2P, 2P) float64
+        Row i: fraction of the energy leaving node i that reaches each node.
+    """
+    if method not in _METHOD_NAMES:
+        raise ValueError(f"method must be one of {_METHOD_NAMES}; got {method!r}")
+    if rng is None:
+        rng = np.random.default_rng(0)
+    elif not isinstance(rng, np.random.Generator):
+        raise TypeError(f"rng must be a numpy.random.Generator; got {type(rng).__name__}")
+    monitor = Monitor() if monitor is None else monitor
+    n = 2 * len(patches.areas)
+    fn = row_function(patches, method, resolution, rotate, rng, rays)
+    out = np.zeros((n, n))
+    batcher = Batcher(n, row_seconds(patches, method, resolution, rays))
+    done = 0
+    while done < n:
+        sources = np.arange(done, min(done + batcher.size, n), dtype=np.int64)
+        out[sources] = batcher.rows(fn, sources)
+        done = sources[-1] + 1
+        monitor.update(done / n, "form factors")
+    return out
+
+
+def discover(store, rows_fn, allowed, start_active, frontier, monitor, budget, batcher,
+             expand=True):
+    """Grow the active set wave by wave from ``frontier``; rows of new active nodes are stored.
+
+    With ``expand=False`` only the rows of ``frontier`` are computed: what they hit is not added.
+
+    Returns (active (2P,) bool, overflow bool). ``overflow``: the store outgrew ``budget``
+    and discovery stopped early.
+    """
+    active = start_active.copy()
+    active[frontier] = True
+    pending = np.asarray(np.sort(frontier), dtype=np.int64)
+    best = 0.0
+    while len(pending):
+        pos = 0
+        next_wave = np.zeros(store.n_cols, dtype=bool)
+        while pos < len(pending):
+            sources = pending[pos:pos + batcher.size]
+            rows = batcher.rows(rows_fn, sources)
+            hit = store.add(sources, rows)
+            pos += len(sources)
+            if expand:
+                new = hit[allowed[hit] & ~active[hit]]
+                active[new] = True
+                next_wave[new] = True
+            done = store.n_stored()
+            left = len(pending) - pos + int(np.count_nonzero(next_wave))
+            best = max(best, done / (done + left))
+            monitor.update(best, f"form factors: {done} nodes")
+            if store.nbytes > budget:
+                return active, True
+        pending = np.flatnonzero(next_wave)
+    return active, False

@@ -1,0 +1,276 @@
+"""Bake settings: one table from which everything about a setting is derived.
+
+Each :class:`Setting` row declares a setting once: its name, type, default, bounds or choices,
+unit, a short label (fits Blender's default sidebar width) and a help text. From the table come
+
+* :class:`BakeSettings` (a frozen dataclass; validation on construction, ``SettingsError`` naming
+  the setting, the allowed range and the value that came);
+* the add-on's panel properties (``radiosity_addon/props.py``), the batch script's command-line
+  options (``radiosity_addon/batch.py``) and the report's settings block
+  (``radiosity_addon/job.py``): every row with ``exposed=True``.
+
+Adding a setting means adding a row here (and using it where it acts). Lengths (``unit='m'``) are
+in scene metres: the add-on converts them from Blender units with the scene's unit scale.
+"""
+
+import dataclasses
+from dataclasses import dataclass
+
+from .constants import (DEFAULT_CREASE_ANGLE, DEFAULT_MAX_ITERATIONS, DEFAULT_MEMORY_BUDGET,
+                        DEFAULT_TOLERANCE, MAX_RESOLUTION)
+from .errors import SettingsError
+from .validate import is_bool, is_int, is_real
+
+#: Smallest memory_budget accepted (bytes): below this even a small room's rows do not fit.
+MIN_MEMORY_BUDGET = 1 << 20
+
+
+@dataclass(frozen=True)
+class Choice:
+    """One allowed value of a choice setting: the value, a short label and a help text."""
+
+    value: object
+    label: str
+    help: str
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One row of the settings table.
+
+    Attributes
+    ----------
+    name : str
+        Python identifier (``BakeSettings`` field, panel property, ``--name-with-dashes`` option).
+    type : {'float', 'int', 'bool', 'choice', 'bool_or_auto'}
+    default : object
+    label : str
+        Short human words for the panel (at most :data:`MAX_LABEL` characters).
+    help : str
+        One or two sentences: the panel's tooltip and the ``--help`` text.
+    unit : str
+        ``'m'`` (a length: converted with the scene's unit scale), ``'deg'``, ``'px'``,
+        ``'bytes'``, ``'x patch size'``, or ``''`` (a pure number).
+    low, high : float or int, optional
+        Bounds (``None``: unbounded on that side).
+    open_low, open_high : bool
+        The bound itself is excluded.
+    even : bool
+        Integers only: the value must be even.
+    choices : tuple of Choice
+        ``type='choice'`` only.
+    soft : (float, float), optional
+        The slider's range in the panel (the hard bounds still apply to typed values).
+    digits : int, optional
+        Decimals the panel shows.
+    exposed : bool
+        In the panel, the batch options and the report's settings block.
+    doc : str
+        More for the API documentation (why the default, what it costs).
+    """
+
+    name: str
+    type: str
+    default: object
+    label: str
+    help: str
+    unit: str = ""
+    low: object = None
+    high: object = None
+    open_low: bool = False
+    open_high: bool = False
+    even: bool = False
+    choices: tuple = ()
+    soft: tuple = None
+    digits: int = None
+    exposed: bool = False
+    doc: str = ""
+
+    @property
+    def is_length(self):
+        return self.unit == "m"
+
+    def values(self):
+        """The allowed values of a choice setting."""
+        return tuple(c.value for c in self.choices)
+
+    def describe(self):
+        """What a valid value is, for messages and help: 'a number in (0, 1)'."""
+        if self.type == "bool":
+            return "True or False"
+        if self.type == "bool_or_auto":
+            return "True, False or 'auto'"
+        if self.type == "choice":
+            return "one of " + ", ".join(repr(v) for v in self.values())
+        word = ("an even integer" if self.even else "an integer") if self.type == "int" \
+            else "a number"
+        if self.low is not None and self.high is not None:
+            text = f"{word} in {'(' if self.open_low else '['}{self.low}, " \
+                   f"{self.high}{')' if self.open_high else ']'}"
+        elif self.low is not None:
+            if self.type == "float":
+                word = "a finite number"
+            text = f"{word} {'>' if self.open_low else '>='} {self.low}"
+        else:
+            text = word
+        return f"{text} ({self.unit})" if self.unit else text
+
+    def valid(self, value):
+        """True when ``value`` is allowed."""
+        if self.type in ("bool", "bool_or_auto"):
+            return is_bool(value) or (self.type == "bool_or_auto" and value == "auto")
+        if self.type == "choice":
+            return isinstance(value, str) and value in self.values()
+        if not (is_int(value) if self.type == "int" else is_real(value)):
+            return False
+        if self.low is not None and (value <= self.low if self.open_low else value < self.low):
+            return False
+        if self.high is not None and (value >= self.high if self.open_high
+                                      else value > self.high):
+            return False
+        return not (self.even and value % 2)
+
+    def check(self, value):
+        """Return ``value``, or raise SettingsError naming the setting, the range and the value."""
+        if not self.valid(value):
+            raise SettingsError(f"{self.name} must be {self.describe()}; got {value!r}")
+        return value
+
+
+#: Longest panel label (characters): about what Blender's default sidebar shows uncut.
+MAX_LABEL = 15
+
+METHODS = (
+    Choice("hemicube", "Hemicube", "Cohen-Greenberg hemicube, made reciprocal (default: on the "
+                                   "speed-accuracy front against Cycles)"),
+    Choice("exact", "Exact", "Contour-integral form factors with ray-traced visibility: slow, "
+                             "accurate"),
+    Choice("hybrid", "Hybrid", "Hemicube, with near patch pairs computed exactly"),
+)
+SOLVERS = (
+    Choice("auto", "Auto", "Pick the solver from the scene size and memory budget"),
+    Choice("direct", "Direct", "Dense linear solve: exact, small scenes only"),
+    Choice("jacobi", "Jacobi", "Jacobi iterations"),
+    Choice("gauss_seidel", "Gauss-Seidel", "Gauss-Seidel sweeps"),
+    Choice("progressive", "Progressive", "Progressive refinement (shooting): no full matrix "
+                                         "kept"),
+)
+CORNERS = (
+    Choice("gather", "At Vertex", "Gather the solved light at every vertex: the value there, as "
+           "Cycles bakes it (default; about one more hemicube per vertex)"),
+    Choice("average", "Patch Average", "Average the patches around each vertex (Gouraud): free, "
+           "but a patch mean, off next to lights, in corners and along shadow edges"),
+)
+
+#: The settings table. Order: the panel's and the report's.
+TABLE = (
+    Setting("patch_size", "float", 0.5, "Patch Size",
+            "Largest patch edge; smaller is finer and slower", unit="m", low=0, open_low=True,
+            soft=(0.01, 5.0), exposed=True),
+    Setting("method", "choice", "hemicube", "Form Factors", "How form factors are computed",
+            choices=METHODS, exposed=True),
+    Setting("resolution", "int", 64, "Resolution",
+            "Hemicube resolution: pixels across the top face (even)", unit="px", low=4,
+            high=MAX_RESOLUTION, even=True, soft=(8, 512), exposed=True,
+            doc=f"At most {MAX_RESOLUTION}: the rasteriser's pixel indices must be exact in "
+                "float32."),
+    Setting("solver", "choice", "auto", "Solver", "Linear solver of the radiosity system",
+            choices=SOLVERS, exposed=True),
+    Setting("tolerance", "float", DEFAULT_TOLERANCE, "Tolerance",
+            "Relative residual at which iterative solvers stop", low=0, high=1, open_low=True,
+            open_high=True, soft=(1e-6, 0.01), digits=6, exposed=True),
+    Setting("max_iterations", "int", DEFAULT_MAX_ITERATIONS, "Iteration Cap",
+            "Sweep cap of Jacobi / Gauss-Seidel (progressive: shots capped at 50 x nodes)",
+            low=1, exposed=True),
+    Setting("corners", "choice", "gather", "Corner Colours", "How corner colours are made from the "
+            "solution", choices=CORNERS, exposed=True,
+            doc="'gather' costs about one more hemicube per vertex; 'average' is free but a "
+                "patch-mean value: off by tens of percent next to luminaires, in room corners "
+                "and along shadow edges."),
+    Setting("refine_levels", "int", 0, "Adaptive Levels",
+            "Split patches where the solved light changes between neighbours and solve again, "
+            "this many times (0: off)", low=0, high=4, exposed=True,
+            doc="Patches are spent where the light changes: shadow edges, light footprints, room "
+                "corners (core.refine)."),
+    Setting("element_levels", "int", 2, "Receiver Levels",
+            "After the solve, split patches where the light changes into smaller receivers for "
+            "the vertex colours, this many times (no re-solve; 0: off)", low=0, high=3,
+            exposed=True,
+            doc="corners='gather' only (core.elements). The vertex gather then sees the light's "
+                "gradient across a patch instead of its mean. Costs one hemicube per new "
+                "element."),
+    Setting("contact_cuts", "bool", True, "Cut at Contacts",
+            "Cut patches along the lines where objects touch or pierce a surface (a box on a "
+            "floor), so no light leaks under objects and their feet are not too dark",
+            exposed=True, doc="core.contacts."),
+    Setting("rotate_hemicube", "bool", True, "Rotate Cubes",
+            "Random rotation of each hemicube about its normal (breaks up aliasing; drawn from "
+            "seed)"),
+    Setting("two_sided", "bool", True, "Two Sided",
+            "Both sides of every polygon are surfaces (Cycles' behaviour); off: back sides "
+            "absorb"),
+    Setting("crease_angle", "float", DEFAULT_CREASE_ANGLE, "Crease Angle",
+            "Corner colours average patches whose normals are within this angle", unit="deg",
+            low=0, high=180),
+    Setting("memory_budget", "int", DEFAULT_MEMORY_BUDGET, "Memory Budget",
+            "Bytes allowed for kept form factors; above it the solve runs matrix-free",
+            unit="bytes", low=MIN_MEMORY_BUDGET),
+    Setting("seed", "int", 0, "Seed",
+            "Seed of every random choice (hemicube rotations, rays)", low=0),
+    Setting("rays", "int", 16, "Rays",
+            "Visibility rays per patch pair of the 'exact' and 'hybrid' methods", low=1),
+    Setting("reciprocity", "bool_or_auto", "auto", "Reciprocity",
+            "Make the kept form factors reciprocal with their row sums kept; 'auto': on for "
+            "'hemicube'",
+            doc="Dense solves only: matrix-free shooting conserves energy by construction. On "
+                "room_with_boxes(500) it cuts the hemicube's error against the exact method "
+                "from 85 % to 25 % and the energy imbalance from -27 % to 0; off for 'hybrid' "
+                "and 'exact', whose near pairs are already accurate."),
+    Setting("near", "float", 1.5, "Near Pairs",
+            "'hybrid' only: pairs nearer than this times the larger patch size get exact form "
+            "factors", unit="x patch size", low=0),
+    Setting("refine_threshold", "float", 0.1, "Refine Step",
+            "Relative luminance difference between neighbouring patches that refines both",
+            low=0, high=1, open_low=True, open_high=True),
+    Setting("element_threshold", "float", 0.3, "Receiver Step",
+            "Relative luminance difference between neighbours that splits them into elements",
+            low=0, high=1, open_low=True, open_high=True),
+)
+
+#: Rows by name.
+BY_NAME = {row.name: row for row in TABLE}
+
+#: Names of the settings shown in the panel, the batch options and the report.
+EXPOSED = tuple(row.name for row in TABLE if row.exposed)
+
+_PY_TYPES = dict(float=float, int=int, bool=bool, choice=str, bool_or_auto=object)
+
+
+def _docstring():
+    lines = ["Settings of a bake, validated on construction (``SettingsError`` names the setting).",
+             "", "Built from :data:`core.settings.TABLE`.", "", "Attributes", "----------"]
+    for row in TABLE:
+        kind = {"choice": "str", "bool_or_auto": "bool or 'auto'"}.get(row.type, row.type)
+        lines.append(f"{row.name} : {kind}")
+        extra = f" {row.doc}" if row.doc else ""
+        lines.append(f"    {row.help}. Must be {row.describe()}; default {row.default!r}.{extra}")
+    return "\n".join(lines)
+
+
+def _post_init(self):
+    for name, row in BY_NAME.items():
+        row.check(getattr(self, name))
+
+
+BakeSettings = dataclasses.make_dataclass(
+    "BakeSettings", [(row.name, _PY_TYPES[row.type], dataclasses.field(default=row.default))
+                     for row in TABLE],
+    namespace={"__post_init__": _post_init, "__doc__": _docstring(),
+               "__module__": __name__}, frozen=True, kw_only=True)
+
+
+def as_dict(settings, names=None):
+    """The settings' values as a plain dict (JSON-friendly), in table order."""
+    names = EXPOSED if names is None else names
+    return {name: getattr(settings, name) for name in names}
+
