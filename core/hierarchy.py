@@ -22,9 +22,13 @@ Two 1 m squares (floor and emitter) in 0.5 m patches; split one floor patch: its
 neighbours then carry a hanging midpoint each and are triangulated in the output.
 
 >>> import numpy as np
->>> from core import samples
 >>> from core.patches import make_patches
->>> scene = samples.opposed_squares()
+>>> from core.scene import scene_from_polygons
+>>> square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
+>>> scene = scene_from_polygons(np.vstack([square, square[::-1] + [0, 0, 1]]),
+...                             [[0, 1, 2, 3], [4, 5, 6, 7]], [0, 1],
+...                             [[0.5] * 3, [0.0] * 3], [[0.0] * 3, [1.0] * 3],
+...                             face_objects=[0, 1], object_names=("floor", "emitter"))
 >>> tree = ElementTree.from_patches(scene, make_patches(scene, 0.5))
 >>> tree.n_leaves
 8
@@ -43,8 +47,8 @@ import numpy as np
 from .conforming import (clip_convex_rings, output_mesh, parent_weights,  # noqa: F401 (API)
                          triangulate_hanging)
 from .geometry import newell_normals_areas, pairs_by_key, ragged
-from .patches import (_QUAD_CHILDREN, _TRI_CHILDREN, Patches, _assemble, _connected_labels,
-                      _material_table)
+from .patches import (QUAD_CHILDREN, TRI_CHILDREN, Patches, assemble_patches, connected_labels,
+                      material_table)
 
 #: Points of one object closer than this times the local element size (longest edge of the
 #: smallest element using them) are one point.
@@ -185,7 +189,7 @@ class ElementTree:
         leaves, leaf_patch = _conform_level0(points, point_obj, pid[sel],
                                              np.asarray(patches.normals)[sel])
         leaf_patch = sel[leaf_patch]
-        face_materials = _material_table(patches)
+        face_materials = material_table(patches)
         leaf_face = face[leaf_patch]
         zero = np.zeros(0, np.int64)
         return cls(points, leaves, leaf_face, leaf_patch, np.zeros(leaves.shape[0], np.int64),
@@ -277,7 +281,7 @@ class ElementTree:
         slot_of[marked] = np.arange(marked.size)
         s = np.flatnonzero(mask[parent])
         ms = slot_of[parent[s]]
-        which = np.where(tri[ms][:, None], _TRI_CHILDREN[child[s]], _QUAD_CHILDREN[child[s]])
+        which = np.where(tri[ms][:, None], TRI_CHILDREN[child[s]], QUAD_CHILDREN[child[s]])
         leaves[s] = np.take_along_axis(table[ms], which, axis=1)
         level = self.leaf_level[parent] + mask[parent]
         tree = ElementTree(points, leaves, self.leaf_face[parent], self.leaf_patch[parent], level,
@@ -324,7 +328,7 @@ class ElementTree:
         key = self.leaves[use] * np.int64(n_faces) + self.leaf_face[leaf]
         i = _lookup(self._inc_key, key)
         hit = i >= 0
-        return _assemble(corners, self.leaf_face, self._face_materials, n_faces,
+        return assemble_patches(corners, self.leaf_face, self._face_materials, n_faces,
                          self._inc_vertex[i[hit]], leaf[hit], self._inc_corner[i[hit]], slot[hit])
 
     def output(self, scene, corner_colours, polygons=None):
@@ -363,7 +367,7 @@ def _weld(xyz, obj, size):
             jj.append(j[k])
         i, j = np.concatenate(ii), np.concatenate(jj)
         close = np.linalg.norm(pts[i] - pts[j], axis=1) <= np.maximum(tol[i], tol[j])
-        label = _connected_labels(n, i[close], j[close])
+        label = connected_labels(n, i[close], j[close])
     else:
         label = np.arange(n)
     rep, merged = np.unique(label, return_inverse=True)

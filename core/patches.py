@@ -114,7 +114,7 @@ def check_scene(scene):
                         f"without {', '.join(missing)}")
 
 
-def _connected_labels(n, a, b):
+def connected_labels(n, a, b):
     """Component label (smallest member) of every node of the graph with links (a[k], b[k]).
 
     Min-label propagation with root hooking and pointer jumping: a handful of vectorised rounds
@@ -254,7 +254,7 @@ def make_patches(scene, max_edge):
     # Ties: opposite edges of a quad (not the collapsed edge C-C of a fan), all edges of a triangle.
     links_a = np.concatenate([q_edges[~collapsed, 0], q_edges[:, 1], t_edges[:, 0], t_edges[:, 1]])
     links_b = np.concatenate([q_edges[~collapsed, 2], q_edges[:, 3], t_edges[:, 1], t_edges[:, 2]])
-    label = _connected_labels(keys.shape[0], links_a, links_b)
+    label = connected_labels(keys.shape[0], links_a, links_b)
     class_count = np.zeros(keys.shape[0])
     np.maximum.at(class_count, label, own)
     counts_f = class_count[label]
@@ -530,8 +530,8 @@ def patch_triangles(patches):
 #: Children of a split quad, as indices into (p0, p1, p2, p3, m01, m12, m23, m30, centre); child k
 #: holds parent corner k in its slot k. A triangle (p3 == p2, so m23 == p2, m30 == m20) uses the
 #: second table: three corner triangles and the middle one, each repeating its last corner.
-_QUAD_CHILDREN = np.array([[0, 4, 8, 7], [4, 1, 5, 8], [8, 5, 2, 6], [7, 8, 6, 3]])
-_TRI_CHILDREN = np.array([[0, 4, 7, 7], [4, 1, 5, 5], [7, 5, 2, 2], [4, 5, 7, 7]])
+QUAD_CHILDREN = np.array([[0, 4, 8, 7], [4, 1, 5, 8], [8, 5, 2, 6], [7, 8, 6, 3]])
+TRI_CHILDREN = np.array([[0, 4, 7, 7], [4, 1, 5, 5], [7, 5, 2, 2], [4, 5, 7, 7]])
 
 
 def subdivide_patches(patches, mask):
@@ -580,7 +580,7 @@ def subdivide_patches(patches, mask):
     tri = patches.is_triangle
     new_corners = c[parent]
     s = np.flatnonzero(mask[parent])
-    which = np.where(tri[parent[s]][:, None], _TRI_CHILDREN[child[s]], _QUAD_CHILDREN[child[s]])
+    which = np.where(tri[parent[s]][:, None], TRI_CHILDREN[child[s]], QUAD_CHILDREN[child[s]])
     new_corners[s] = np.take_along_axis(table[slot_of[parent[s]]], which[:, :, None], axis=1)
 
     inc_p = patches.incidence_patch

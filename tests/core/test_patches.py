@@ -6,7 +6,7 @@ import pytest
 from bench import scenes as samples
 from core import SettingsError, scene_from_polygons
 from core.geometry import newell_vectors
-from core.patches import _connected_labels, make_patches, patch_triangles, subdivide_patches
+from core.patches import connected_labels, make_patches, patch_triangles, subdivide_patches
 
 #: Float64 rounding in sums of up to ~1e4 patch areas of O(1) size: 1e-12 relative leaves room.
 AREA_RTOL = 1e-12
@@ -434,4 +434,4 @@ def test_edge_classes_match_union_find(seed):
     a, b = rng.integers(0, n, 300), rng.integers(0, n, 300)
     chain = rng.permutation(n)[:200]                       # plus one long chain in random order
     a, b = np.r_[a, chain[:-1]], np.r_[b, chain[1:]]
-    np.testing.assert_array_equal(_connected_labels(n, a, b), union_find_labels(n, a, b))
+    np.testing.assert_array_equal(connected_labels(n, a, b), union_find_labels(n, a, b))
