@@ -89,6 +89,8 @@ with_mounts() {  # run a command with /proc, /dev, /dev/pts, /sys and the projec
   bind /dev/pts /dev/pts
   bind /sys /sys
   bind "$here" /project
+  # Blender lists mounted file systems through /etc/mtab, which debootstrap leaves out.
+  [ -e "$root/etc/mtab" ] || ln -s /proc/self/mounts "$root/etc/mtab"
   [ -f /etc/resolv.conf ] && cp -L /etc/resolv.conf "$root/etc/resolv.conf" 2>/dev/null || true
   local rc=0
   "$@" || rc=$?
