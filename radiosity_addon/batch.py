@@ -266,16 +266,26 @@ def run(argv):
     _atomic_write("--in-place" if args.in_place else "--output", out_given, out,
                   lambda tmp: bpy.ops.wm.save_as_mainfile(
                       filepath=tmp, copy=True, compress=False, check_existing=False))
+    # One line per file as it is written: should Blender abort in the render (no GPU), the
+    # console still says what was done.
+    _say(f"baked {report.get('patches', '?')} patches in "
+         f"{report.get('timings', {}).get('total', 0.0):.2f} s -> {out_given}")
     if render:
         _atomic_write("--render", args.render, render,
                       lambda tmp: render_baked(bpy.context.scene, tmp))
         report["render"] = render
+        _say(f"rendered the baked colours -> {args.render}")
     if report_path:
         def dump(tmp):
             with open(tmp, "w", encoding="utf-8") as fh:
                 json.dump(report, fh, indent=2)
         _atomic_write("--report", args.report, report_path, dump)
+        _say(f"report -> {args.report}")
     return report
+
+
+def _say(text):
+    print(f"{PROG}: {text}", flush=True)
 
 
 def render_baked(scene, path):
@@ -309,7 +319,7 @@ def main(argv=None):
     """Entry point: run and exit with 0, or print one line and exit non-zero."""
     argv = sys.argv if argv is None else argv
     try:
-        report = run(argv)
+        run(argv)
     except BatchError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 2 if str(exc).startswith("bad option") else 1
@@ -317,8 +327,6 @@ def main(argv=None):
         text = " ".join(str(exc).split()) or type(exc).__name__
         print(f"{PROG}: error: {type(exc).__name__}: {text}", file=sys.stderr)
         return 1
-    print(f"{PROG}: baked {report.get('patches', '?')} patches in "
-          f"{report.get('timings', {}).get('total', 0.0):.2f} s -> {report['output']}")
     return 0
 
 

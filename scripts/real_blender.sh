@@ -12,7 +12,7 @@ set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 root="${RADIOSITY_REAL_BLENDER_ROOT:-/var/cache/radiosity-baker/trixie}"
 suite=trixie
-packages="blender python3-numpy xvfb xauth xdotool imagemagick"
+packages="blender python3-numpy xvfb xauth xdotool imagemagick libegl1 libegl-mesa0"
 stamp="$root/.radiosity-root-complete"
 stamp_text="$suite: $packages"
 

@@ -216,7 +216,9 @@ def test_console_names_no_temporary_file_and_no_egl_noise(package, tmp_path):
     console = proc.stdout + proc.stderr
     for noise in (".radiosity-", "Saved copy", "EGL", "Saved:"):
         assert noise not in console, console
-    assert proc.stdout.splitlines()[-1].endswith(str(tmp_path / "o.blend"))
+    said = [ln for ln in proc.stdout.splitlines() if ln.startswith("radiosity-batch: ")]
+    assert [ln.split(" -> ")[1] for ln in said] == [str(tmp_path / n)
+                                                    for n in ("o.blend", "o.png", "o.json")]
     assert sorted(os.listdir(tmp_path)) == ["o.blend", "o.json", "o.png", "scene.blend"]
 
 
@@ -277,3 +279,16 @@ def test_batch_leaves_no_blender_folder_in_tmp(package, tmp_path):
                        timeout=120, env=env, cwd=ROOT)
     assert (tmp_path / "o.blend").exists()
     assert os.listdir(tmp) == []
+
+
+def test_readme_caption_states_the_samples_own_settings(package):
+    """The picture caption quotes only what the sample fixes (no counts that drift with the core)."""
+    import re
+
+    with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as fh:
+        caption = fh.read().split("](docs/images/cornell_box.png)", 1)[1].split("\n\n", 2)[1]
+    bpy.ops.wm.open_mainfile(filepath=CORNELL, load_ui=False)
+    resolution = int(re.search(r"hemicube R = (\d+)", caption).group(1))
+    assert resolution == bpy.context.scene.radiosity.resolution
+    assert bpy.context.scene.radiosity.corners == "GATHER" and "gathered at every vertex" in caption
+    assert not re.search(r"\d[\d,]* (patches|receiver elements)", caption), caption

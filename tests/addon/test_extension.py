@@ -5,6 +5,7 @@ Runs under bpy 5.0.1 (.venv) and bpy 4.2 LTS (.venv-bpy42), the oldest Blender t
 
 import glob
 import os
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -122,3 +123,35 @@ def test_register_unregister_twice_leaves_nothing_behind():
     finally:
         if was:
             PACKAGE.register()
+
+
+def readme_install_blocks():
+    """The ```sh blocks of README.md's Install section, as shell text."""
+    with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as fh:
+        text = fh.read()
+    section = text.split("### Install", 1)[1].split("\n### ", 1)[0]
+    return [b.split("\n", 1)[1] for b in section.split("```")[1::2] if b.startswith("sh\n")]
+
+
+def fresh_clone(dest):
+    """The repository's tracked files copied to *dest* (what a fresh clone holds: no dist/)."""
+    files = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True,
+                           text=True).stdout.split("\0")
+    for name in filter(None, files):
+        target = os.path.join(dest, name)
+        os.makedirs(os.path.dirname(target), exist_ok=True)
+        if os.path.isfile(os.path.join(ROOT, name)):
+            shutil.copy2(os.path.join(ROOT, name), target)
+    return dest
+
+
+def test_readme_build_command_works_in_a_fresh_clone(tmp_path):
+    blocks = [b for b in readme_install_blocks() if b.startswith("mkdir -p dist\n.venv/")]
+    assert len(blocks) == 1, readme_install_blocks()
+    clone = fresh_clone(str(tmp_path / "clone"))
+    assert not os.path.exists(os.path.join(clone, "dist"))
+    os.symlink(os.path.join(ROOT, ".venv"), os.path.join(clone, ".venv"))
+    proc = subprocess.run(["bash", "-euc", blocks[0]], cwd=clone, capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert len(glob.glob(os.path.join(clone, "dist", "radiosity_baker-*.zip"))) == 1
