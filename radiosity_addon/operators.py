@@ -89,6 +89,17 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
         job = _Running.job
         if job is None:  # unregistered or finished elsewhere: nothing left to drive
             return {"CANCELLED"}
+        try:
+            return self._step(context, event, job)
+        except Exception as exc:  # a bug: never leave the panel without its button
+            traceback.print_exc()
+            job.cancel()
+            _end_display(context)
+            _Running.clear()
+            self.report({"ERROR"}, f"Radiosity bake failed ({type(exc).__name__}): {exc}")
+            return {"CANCELLED"}
+
+    def _step(self, context, event, job):
         if event.type == "ESC" and event.value == "PRESS":
             job.cancel()
             context.window_manager.radiosity_status = "Cancelling"

@@ -1,8 +1,8 @@
 """The sidebar panel (3D Viewport > Sidebar > Radiosity) and its sub-panels.
 
 Laid out for the sidebar's default width: quality settings first, the bake button, then the
-display of the result; solver and scope settings fold away in "Advanced", the last bake's figures
-in "Last Bake". Labels are short enough not to be cut off at the default width (checked by the
+display of the result; solver and scope settings fold away in "Advanced" (a layout panel), the
+last bake's figures in the "Last Bake" sub-panel. Labels are short enough not to be cut off at the default width (checked by the
 real-Blender UI tier's screenshot, tests/ui).
 """
 
@@ -14,7 +14,7 @@ import bpy
 STAGE_LABELS = (
     ("total", "Total"),
     ("read_scene", "Read scene"),
-    ("patches", "Patches"),
+    ("patches", "Make patches"),
     ("form_factors", "Form factors"),
     ("solve", "Solve"),
     ("colours", "Vertex colours"),
@@ -81,28 +81,24 @@ class VIEW3D_PT_radiosity(bpy.types.Panel):
         else:
             box.label(text="No bake in this scene yet")
 
+        # A layout panel, folded by default; its open state is a window-manager property (not
+        # saved in the file), so scripts and the UI tier can unfold it too.
+        header, body = layout.panel_prop(wm, "radiosity_show_advanced")
+        header.label(text="Advanced")
+        if body is not None:
+            draw_advanced(body, props)
 
-class VIEW3D_PT_radiosity_advanced(bpy.types.Panel):
-    bl_label = "Advanced"
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "Radiosity"
-    bl_parent_id = "VIEW3D_PT_radiosity"
-    bl_options = {"DEFAULT_CLOSED"}
 
-    def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = False
-        layout.use_property_decorate = False
-        props = context.scene.radiosity
-        _split_row(layout, "Solver").prop(props, "solver", text="")
-        col = layout.column(align=True)
-        col.prop(props, "tolerance")
-        col.prop(props, "max_iterations", text="Iteration Cap")
-        col = layout.column()
-        col.prop(props, "contact_cuts")
-        col.prop(props, "selected_only")
-        col.prop(props, "make_single_user")
+def draw_advanced(layout, props):
+    """Solver and scope settings (the folded part of the panel)."""
+    _split_row(layout, "Solver").prop(props, "solver", text="")
+    col = layout.column(align=True)
+    col.prop(props, "tolerance")
+    col.prop(props, "max_iterations", text="Iteration Cap")
+    col = layout.column()
+    col.prop(props, "contact_cuts")
+    col.prop(props, "selected_only")
+    col.prop(props, "make_single_user")
 
 
 class VIEW3D_PT_radiosity_last(bpy.types.Panel):
@@ -157,14 +153,18 @@ def summary_lines(text):
     return lines
 
 
-CLASSES = (VIEW3D_PT_radiosity, VIEW3D_PT_radiosity_advanced, VIEW3D_PT_radiosity_last)
+CLASSES = (VIEW3D_PT_radiosity, VIEW3D_PT_radiosity_last)
 
 
 def register():
     for cls in CLASSES:
         bpy.utils.register_class(cls)
+    bpy.types.WindowManager.radiosity_show_advanced = bpy.props.BoolProperty(
+        name="Advanced", description="Show the solver and scope settings", default=False,
+        options={"SKIP_SAVE"})
 
 
 def unregister():
+    del bpy.types.WindowManager.radiosity_show_advanced
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)

@@ -104,6 +104,7 @@ def _registered_state():
     return (hasattr(bpy.types.Scene, "radiosity"),
             hasattr(bpy.types.WindowManager, "radiosity_progress"),
             hasattr(bpy.types.WindowManager, "radiosity_status"),
+            hasattr(bpy.types.WindowManager, "radiosity_show_advanced"),
             "bake" in dir(bpy.ops.radiosity),
             all(cls.is_registered for cls in classes),
             any(cls.is_registered for cls in classes))
@@ -114,12 +115,12 @@ def test_register_unregister_twice_leaves_nothing_behind():
     if was:  # the session's registration (other test modules) is restored at the end
         PACKAGE.unregister()
     try:
-        assert _registered_state() == (False,) * 6
+        assert _registered_state() == (False,) * 7
         for _ in range(2):
             PACKAGE.register()
-            assert _registered_state() == (True,) * 6
+            assert _registered_state() == (True,) * 7
             PACKAGE.unregister()
-            assert _registered_state() == (False,) * 6
+            assert _registered_state() == (False,) * 7
     finally:
         if was:
             PACKAGE.register()

@@ -194,6 +194,12 @@ def scenario():
     yield 1.0
     results["shading_show_on"] = shading()
     screenshot("after_bake.png")
+    # Unfold Advanced (as a click on its header does) to see its labels at the default width.
+    results["advanced_folded"] = not bpy.context.window_manager.radiosity_show_advanced
+    bpy.context.window_manager.radiosity_show_advanced = True
+    redraw()
+    yield 1.0
+    screenshot("advanced_open.png")
 
     # 3. Disable and enable the extension (unregister, register) as Preferences does.
     bpy.ops.preferences.addon_disable(module=MODULE)

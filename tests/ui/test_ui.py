@@ -111,6 +111,11 @@ def test_show_bake_switches_the_viewport(session):
     assert results["shading_show_on"] == results["shading_after_bake"]
 
 
+def test_advanced_settings_start_folded(session):
+    results, _ = session
+    assert results["advanced_folded"] is True
+
+
 def test_register_unregister_and_quit_mid_bake_leave_no_traceback(session):
     results, logs = session
     assert results["registered_after_disable"] is False
@@ -123,7 +128,8 @@ def test_register_unregister_and_quit_mid_bake_leave_no_traceback(session):
             assert bad not in logs[name], f"{bad!r} in {name}:\n{logs[name][-3000:]}"
 
 
-@pytest.mark.parametrize("name", ["before_bake.png", "during_bake.png", "after_bake.png"])
+@pytest.mark.parametrize("name", ["before_bake.png", "during_bake.png", "after_bake.png",
+                                  "advanced_open.png"])
 def test_screenshot_is_not_blank(session, name):
     from PIL import Image
 
