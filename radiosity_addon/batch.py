@@ -111,7 +111,8 @@ def _with_separator(argv):
         if word in ("--python", "-P"):
             at = i + 2
     if at is None:
-        return "blender --background scene.blend --python radiosity_addon/batch.py -- --output baked.blend"
+        return ("blender --background scene.blend --python radiosity_addon/batch.py -- "
+                "--output baked.blend")
     return " ".join(words[:at] + ["--"] + words[at:])
 
 

@@ -2,8 +2,8 @@
 
 Laid out for the sidebar's default width: quality settings first, the bake button, then the
 display of the result; solver and scope settings fold away in "Advanced" (a layout panel), the
-last bake's figures in the "Last Bake" sub-panel. Labels are short enough not to be cut off at the default width (checked by the
-real-Blender UI tier's screenshot, tests/ui).
+last bake's figures in the "Last Bake" sub-panel. Labels are short enough not to be cut off at the
+default width (seen in the real-Blender UI tier's screenshots, tests/ui).
 """
 
 import json
@@ -110,7 +110,8 @@ class VIEW3D_PT_radiosity_last(bpy.types.Panel):
 
     @classmethod
     def poll(cls, context):
-        return bool(context.scene is not None and summary_lines(context.scene.radiosity.last_report))
+        scene = context.scene
+        return bool(scene is not None and summary_lines(scene.radiosity.last_report))
 
     def draw(self, context):
         col = self.layout.column(align=True)

@@ -23,18 +23,20 @@ die() { echo "real_blender.sh: $*" >&2; exit 1; }
 mirror() {  # the first Debian mirror in this machine's apt sources
   local m=""
   if [ -f /etc/apt/sources.list ]; then
-    m="$(awk '$1 == "deb" { for (i = 2; i <= NF; i++) if ($i ~ /^https?:\/\//) { print $i; exit } }' \
-      /etc/apt/sources.list)"
+    m="$(awk '$1 == "deb" { for (i = 2; i <= NF; i++) if ($i ~ /^https?:\/\//) {
+             print $i; exit } }' /etc/apt/sources.list)"
   fi
   if [ -z "$m" ]; then
     m="$(cat /etc/apt/sources.list.d/*.sources 2>/dev/null \
-      | awk 'tolower($1) == "uris:" { for (i = 2; i <= NF; i++) if ($i ~ /^https?:\/\// && $i !~ /security/) { print $i; exit } }')"
+      | awk 'tolower($1) == "uris:" { for (i = 2; i <= NF; i++)
+               if ($i ~ /^https?:\/\// && $i !~ /security/) { print $i; exit } }')"
   fi
-  [ -n "$m" ] || die "no http(s) Debian mirror found in /etc/apt/sources.list or /etc/apt/sources.list.d/*.sources"
+  [ -n "$m" ] || die "no http(s) Debian mirror in /etc/apt/sources.list or" \
+    "/etc/apt/sources.list.d/*.sources"
   echo "${m%/}"
 }
 
-stale_mounts() {  # a killed earlier run may have left binds inside the root: never delete through them
+stale_mounts() {  # binds left by a killed earlier run: never delete through them
   local m
   for m in $(awk -v r="$root/" 'index($2, r) == 1 { print $2 }' /proc/mounts | sort -r); do
     umount -l "$m" || die "cannot unmount $m left by an earlier run"
@@ -100,7 +102,7 @@ with_mounts() {  # run a command with /proc, /dev, /dev/pts, /sys and the projec
 }
 
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$stamp_text" ]; then
-  mkdir -p "$(dirname "$root")" || die "cannot create $(dirname "$root")"
+  mkdir -p "$(dirname "$root")" 2>/dev/null || die "cannot create $(dirname "$root") for the root"
   build_root
 fi
 

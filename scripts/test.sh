@@ -14,8 +14,13 @@ bash scripts/setup_env.sh np2
 bash scripts/setup_env.sh blender
 bash scripts/setup_env.sh bpy42
 set +e
-results="$(mktemp -d "${TMPDIR:-/tmp}/radiosity-junit.XXXXXX")"
-trap 'rm -rf "$results"' EXIT
+# Everything the stages write to a temporary folder (JUnit files, pytest's tmp_path, Blender's
+# blender_* session folders) goes under one folder, removed at the end.
+scratch="$(mktemp -d "${TMPDIR:-/tmp}/radiosity-tests.XXXXXX")"
+trap 'rm -rf "$scratch"' EXIT
+results="$scratch/junit"
+mkdir "$results"
+export TMPDIR="$scratch"
 status=0
 nargs=$#
 run() {  # run NAME PYTHON PYTEST-ARGS...

@@ -279,10 +279,14 @@ def test_batch_leaves_no_blender_folder_in_tmp(package, tmp_path):
                        timeout=120, env=env, cwd=ROOT)
     assert (tmp_path / "o.blend").exists()
     assert os.listdir(tmp) == []
+    # ... and Blender does put its session folder there (so the check above means something).
+    where = subprocess.run([sys.executable, "-c", "import bpy; print(bpy.app.tempdir)"],
+                           capture_output=True, text=True, timeout=60, env=env).stdout
+    assert where.strip().startswith(os.path.join(str(tmp), "blender_"))
 
 
 def test_readme_caption_states_the_samples_own_settings(package):
-    """The picture caption quotes only what the sample fixes (no counts that drift with the core)."""
+    """The picture caption quotes what the sample fixes, no counts that drift with the core."""
     import re
 
     with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as fh:

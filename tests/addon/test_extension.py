@@ -85,17 +85,26 @@ INSTALL_SCRIPT = textwrap.dedent("""
     addon_utils.disable(mods[0])
     assert not hasattr(bpy.types.Scene, "radiosity")
     print("INSTALLED-OK")
+    # The bpy 4.2 module can crash while the interpreter shuts down, before Blender removes its
+    # session folder: remove it and leave at once.
+    import os, shutil
+    sys.stdout.flush()
+    shutil.rmtree(bpy.app.tempdir, ignore_errors=True)
+    os._exit(0)
 """)
 
 
 def test_zip_installs_registers_and_bakes(built_zip, tmp_path):
-    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "user"))
+    (tmp_path / "tmp").mkdir()
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "user"),
+               TMPDIR=str(tmp_path / "tmp"))
     script = tmp_path / "install.py"
     script.write_text(INSTALL_SCRIPT)
     proc = subprocess.run([sys.executable, str(script), built_zip], capture_output=True,
                           text=True, timeout=180, env=env, cwd=str(tmp_path))
     assert "INSTALLED-OK" in proc.stdout, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert os.path.isdir(tmp_path / "user" / "extensions" / "user_default" / "radiosity_baker")
+    assert os.listdir(tmp_path / "tmp") == []  # Blender's session folder is gone
 
 
 def _registered_state():

@@ -88,7 +88,8 @@ def press_escape():
     wid = wid[0]
     x = main.x + main.width // 2
     y = window.height - (main.y + main.height // 2)
-    out = [xdotool("windowfocus", "--sync", wid), xdotool("mousemove", "--window", wid, str(x), str(y)),
+    out = [xdotool("windowfocus", "--sync", wid),
+           xdotool("mousemove", "--window", wid, str(x), str(y)),
            xdotool("key", "Escape")]
     return "; ".join(r.stderr.strip() for r in out if r.returncode) or "ok"
 
