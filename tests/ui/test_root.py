@@ -2,6 +2,7 @@
 
 import os
 import subprocess
+import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SCRIPT = os.path.join(ROOT, "scripts", "real_blender.sh")
@@ -28,3 +29,14 @@ def test_cached_root_runs_a_command_in_the_project():
     root = os.environ.get("RADIOSITY_REAL_BLENDER_ROOT", "/var/cache/radiosity-baker/trixie")
     with open("/proc/mounts", encoding="utf-8") as fh:
         assert not [ln for ln in fh if f" {root}/" in ln]
+
+
+def test_a_stage_that_could_not_run_counts_as_a_failure(tmp_path):
+    total = os.path.join(ROOT, "scripts", "junit_total.py")
+    xml = subprocess.run([sys.executable, total, "--failure", "ui-blender-4.3", "no root"],
+                         capture_output=True, text=True, check=True).stdout
+    (tmp_path / "ui.xml").write_text(xml)
+    proc = subprocess.run([sys.executable, total, str(tmp_path / "ui.xml")], capture_output=True,
+                          text=True)
+    assert proc.returncode == 1
+    assert proc.stdout.strip() == "total: 0 passed, 1 failed, 0 skipped"
