@@ -9,15 +9,21 @@ Options: ``--report report.json``, ``--render out.png`` (Workbench render of the
 the scene camera), ``--patch-size``, ``--method``, ``--resolution``, ``--solver``, ``--tolerance``,
 ``--max-iterations``, ``--selected-only``, ``--make-single-user``, ``--in-place``. Anything not given
 comes from the .blend's own bake settings (Scene > Radiosity). The input is never overwritten unless
-``--in-place``; outputs are written to a temporary file and renamed. Any error exits with status 1
-(2 for a bad option) and one line on stderr.
+``--in-place``; outputs are written to a temporary file and renamed. Every output path is checked
+before the bake (its folder exists and is writable, it is not a folder). Any error exits with
+status 1 (2 for a bad option) and one line on stderr that names the path or option as given; this
+holds for failures before the package loads too (NumPy missing from a distribution's Blender,
+options given without ``--``), where Blender alone would print a traceback and exit 0.
 """
 
 import argparse
+import contextlib
+import errno
 import importlib
 import importlib.util
 import json
 import os
+import shutil
 import sys
 import tempfile
 
@@ -87,31 +93,136 @@ def build_parser(need_input):
     return p
 
 
+#: Blender's own options that mean we run inside the blender executable (sys.argv is Blender's).
+_BLENDER_FLAGS = ("--background", "-b", "--python", "-P", "--python-expr", "--factory-startup")
+
+#: How to get NumPy when the Blender running us has none (distributions' Blender builds).
+NUMPY_HELP = ("NumPy is missing from this Blender's Python. Blender from blender.org bundles it; "
+              "for a distribution's Blender install its NumPy package (Debian/Ubuntu: "
+              "sudo apt install python3-numpy), or run the bake with the project's environment: "
+              "bash scripts/bake_sample.sh, or .venv/bin/python radiosity_addon/batch.py "
+              "scene.blend --output baked.blend")
+
+
 def _split_argv(argv):
-    """(arguments for us, True when running inside the blender executable)."""
+    """(arguments for us, True when running inside the blender executable).
+
+    Raises BatchError when Blender's own options reach us: the ``--`` that separates Blender's
+    options from ours was forgotten.
+    """
     if "--" in argv:  # blender --background f.blend --python batch.py -- <ours>
         return argv[argv.index("--") + 1:], True
+    if any(a in _BLENDER_FLAGS for a in argv[1:]):
+        raise BatchError(f"put -- between Blender's options and the batch options: "
+                         f"{_with_separator(argv)}")
     return argv[1:], False
 
 
-def _atomic_write(path, write):
-    """Call write(tmp_path) and rename the temporary file onto *path* (same folder)."""
-    folder = os.path.dirname(os.path.abspath(path))
+def _with_separator(argv):
+    """The command line *argv* with ``--`` inserted after the script (what the user meant)."""
+    words = [os.path.basename(argv[0]) or "blender"] + list(argv[1:])
+    at = None
+    for i, word in enumerate(words[:-1]):
+        if word in ("--python", "-P"):
+            at = i + 2
+    if at is None:
+        return ("blender --background scene.blend --python radiosity_addon/batch.py -- "
+                "--output baked.blend")
+    return " ".join(words[:at] + ["--"] + words[at:])
+
+
+def check_numpy():
+    """Raise BatchError with :data:`NUMPY_HELP` unless NumPy can be imported."""
+    try:
+        import numpy  # noqa: F401
+    except ImportError:
+        raise BatchError(NUMPY_HELP) from None
+
+
+def _output_path(option, given, taken):
+    """Check an output path before the bake; return it absolute.
+
+    *option* is the option's name (``--report``), *given* the path as typed (used in messages),
+    *taken* maps absolute paths already claimed by other options to those options.
+    """
+    path = os.path.abspath(given)
+    if os.path.isdir(path):
+        raise BatchError(f"{option} {given}: is a folder; give a file name in it")
+    folder = os.path.dirname(path)
+    shown = os.path.dirname(given) or "."
     if not os.path.isdir(folder):
-        raise BatchError(f"output folder does not exist: {folder}")
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix=".radiosity-", suffix=os.path.splitext(path)[1])
-    os.close(fd)
-    os.remove(tmp)  # a name only: Blender would back up an existing file as <name>1
+        raise BatchError(f"{option} {given}: the folder {shown} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise BatchError(f"{option} {given}: the folder {shown} is not writable")
+    if os.path.exists(path) and not os.access(path, os.W_OK):
+        raise BatchError(f"{option} {given}: the file exists and is read-only")
+    if path in taken:
+        raise BatchError(f"{option} {given}: the same file as {taken[path]}; give another name")
+    taken[path] = option
+    return path
+
+
+@contextlib.contextmanager
+def _quiet():
+    """Silence what Blender's C code prints on stdout and stderr while it saves or renders.
+
+    It names our temporary files ("Saved copy as .radiosity-....blend") and prints EGL errors of
+    its headless GPU set-up although the render succeeds; the batch prints its own lines instead.
+    """
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = (os.dup(1), os.dup(2))
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 1)
+        os.dup2(null, 2)
+        yield
+    finally:
+        _flush_c_stdio()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for fd in (*saved, null):
+            os.close(fd)
+
+
+def _flush_c_stdio():
+    """fflush(NULL): C-level buffered output goes where it was meant to, before fds move back."""
+    try:
+        import ctypes
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError, TypeError):
+        pass  # no C library to flush (not POSIX): nothing buffered there either
+
+
+def _atomic_write(option, given, path, write):
+    """Call write(tmp_path) and rename the temporary file onto *path* (same folder).
+
+    Errors name *option* and the path as the user gave it (*given*), never the temporary file.
+    """
+    folder = os.path.dirname(path)
+    tmp = None
     umask = os.umask(0)
     os.umask(umask)
     try:
-        write(tmp)
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=".radiosity-",
+                                   suffix=os.path.splitext(path)[1])
+        os.close(fd)
+        os.remove(tmp)  # a name only: Blender would back up an existing file as <name>1
+        with _quiet():
+            write(tmp)
         if not os.path.isfile(tmp):
-            raise BatchError(f"nothing was written for {path}")
+            raise BatchError(f"{option} {given}: Blender wrote nothing")
         os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
+    except OSError as exc:
+        reason = os.strerror(exc.errno) if exc.errno else "the file system refused it"
+        raise BatchError(f"{option} {given}: cannot write it ({reason.lower()})") from None
+    except RuntimeError:  # a Blender operator failed (its text names the temporary file)
+        raise BatchError(f"{option} {given}: Blender could not write it") from None
     finally:
-        for leftover in (tmp, tmp + "1"):
+        for leftover in (tmp, tmp + "1") if tmp else ():
             if os.path.exists(leftover):
                 os.remove(leftover)
 
@@ -132,16 +243,23 @@ def run(argv):
         except RuntimeError as exc:
             raise BatchError(f"cannot open {args.input}: {str(exc).strip().splitlines()[-1]}")
     src = os.path.abspath(bpy.data.filepath)
+    taken = {src: "the input"}
     if args.in_place:
         if args.output and os.path.abspath(args.output) != src:
             raise BatchError("--in-place and --output name different files; give one")
-        out = src
+        out_given, out = bpy.data.filepath, src
+        if not os.access(src, os.W_OK) or not os.access(os.path.dirname(src), os.W_OK):
+            raise BatchError(f"--in-place: {out_given} or its folder is not writable")
+        del taken[src]
+        taken[src] = "--in-place"
     elif args.output:
-        out = os.path.abspath(args.output)
-        if os.path.exists(out) and os.path.samefile(out, src):
+        if os.path.exists(args.output) and os.path.samefile(args.output, src):
             raise BatchError("--output is the input file; use --in-place to overwrite it")
+        out_given, out = args.output, _output_path("--output", args.output, taken)
     else:
         raise BatchError("give --output baked.blend (or --in-place)")
+    render = args.render and _output_path("--render", args.render, taken)
+    report_path = args.report and _output_path("--report", args.report, taken)
     if args.render and bpy.context.scene.camera is None:
         raise BatchError("--render needs a scene camera; the scene has none")
 
@@ -161,18 +279,29 @@ def run(argv):
         raise BatchError(str(exc))
     report["input"] = src
     report["output"] = out
-    _atomic_write(out, lambda tmp: bpy.ops.wm.save_as_mainfile(
-        filepath=tmp, copy=True, compress=False, check_existing=False))
-    if args.render:
-        _atomic_write(os.path.abspath(args.render),
+    _atomic_write("--in-place" if args.in_place else "--output", out_given, out,
+                  lambda tmp: bpy.ops.wm.save_as_mainfile(
+                      filepath=tmp, copy=True, compress=False, check_existing=False))
+    # One line per file as it is written: should Blender abort in the render (no GPU), the
+    # console still says what was done.
+    _say(f"baked {report.get('patches', '?')} patches in "
+         f"{report.get('timings', {}).get('total', 0.0):.2f} s -> {out_given}")
+    if render:
+        _atomic_write("--render", args.render, render,
                       lambda tmp: render_baked(bpy.context.scene, tmp))
-        report["render"] = os.path.abspath(args.render)
-    if args.report:
+        report["render"] = render
+        _say(f"rendered the baked colours -> {args.render}")
+    if report_path:
         def dump(tmp):
             with open(tmp, "w", encoding="utf-8") as fh:
                 json.dump(report, fh, indent=2)
-        _atomic_write(os.path.abspath(args.report), dump)
+        _atomic_write("--report", args.report, report_path, dump)
+        _say(f"report -> {args.report}")
     return report
+
+
+def _say(text):
+    print(f"{PROG}: {text}", flush=True)
 
 
 def render_baked(scene, path):
@@ -206,7 +335,7 @@ def main(argv=None):
     """Entry point: run and exit with 0, or print one line and exit non-zero."""
     argv = sys.argv if argv is None else argv
     try:
-        report = run(argv)
+        run(argv)
     except BatchError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 2 if str(exc).startswith("bad option") else 1
@@ -214,8 +343,6 @@ def main(argv=None):
         text = " ".join(str(exc).split()) or type(exc).__name__
         print(f"{PROG}: error: {type(exc).__name__}: {text}", file=sys.stderr)
         return 1
-    print(f"{PROG}: baked {report.get('patches', '?')} patches in "
-          f"{report.get('timings', {}).get('total', 0.0):.2f} s -> {report['output']}")
     return 0
 
 
@@ -228,12 +355,39 @@ def _load_package():
     return bootstrap.load_package()
 
 
-if __name__ == "__main__":
-    _batch = importlib.import_module(f"{_load_package().__name__}.radiosity_addon.batch")
-    _code = _batch.main(sys.argv)
+def _exit(code):
+    """End the process with *code*, after removing Blender's session temporary folder.
+
+    os._exit: inside the blender executable a SystemExit from a --python script is not turned
+    into the process's status, and the bpy 4.2 module can crash while the interpreter shuts down
+    (exit status -11 after a successful bake). Every output is complete and renamed by now. Blender
+    removes its /tmp/blender_* folder only on a normal exit, so that is done here.
+    """
     sys.stdout.flush()
     sys.stderr.flush()
-    # os._exit: inside the blender executable a SystemExit from a --python script is not turned
-    # into the process's status, and the bpy 4.2 module can crash while the interpreter shuts
-    # down (exit status -11 after a successful bake). Every output is complete and renamed by now.
-    os._exit(_code)
+    bpy = sys.modules.get("bpy")
+    tmp = getattr(getattr(bpy, "app", None), "tempdir", "") if bpy else ""
+    if tmp and os.path.basename(os.path.normpath(tmp)).startswith("blender_"):
+        shutil.rmtree(tmp, ignore_errors=True)
+    os._exit(code)
+
+
+def _script_main(argv):
+    """The script's entry point: checks that need no package (the ``--``, NumPy), then main."""
+    try:
+        _split_argv(argv)
+        check_numpy()
+        batch = importlib.import_module(f"{_load_package().__name__}.radiosity_addon.batch")
+    except BatchError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 1
+    except Exception as exc:  # the package failed to load: one line, never exit 0
+        text = " ".join(str(exc).split()) or type(exc).__name__
+        print(f"{PROG}: error: cannot load Radiosity Baker ({type(exc).__name__}: {text})",
+              file=sys.stderr)
+        return 1
+    return batch.main(argv)
+
+
+if __name__ == "__main__":
+    _exit(_script_main(sys.argv))

@@ -19,6 +19,22 @@ def _summary_line(report):
             f"{report.get('timings', {}).get('total', 0.0):.2f} s")
 
 
+class _Running:
+    """The one running modal bake, kept outside the operator instance.
+
+    Blender frees an operator's StructRNA when the modal ends, the window closes or the add-on is
+    unregistered; touching the instance afterwards raises ReferenceError. Plain module state can
+    always be read, so unregister can cancel a bake the operator no longer owns.
+    """
+
+    job = None    # BakeJob
+    timer = None  # bpy.types.Timer
+
+    @classmethod
+    def clear(cls):
+        cls.job = cls.timer = None
+
+
 class RADIOSITY_OT_bake(bpy.types.Operator):
     """Bake diffuse interreflection into the 'Radiosity' colour attribute of the scene's meshes"""
 
@@ -26,18 +42,13 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
     bl_label = "Bake Radiosity"
     bl_options = {"REGISTER", "UNDO"}
 
-    _job = None
-    _timer = None
-
     @classmethod
     def poll(cls, context):
         return context.scene is not None and not RADIOSITY_OT_bake.running()
 
     @staticmethod
     def running():
-        return RADIOSITY_OT_bake._active is not None
-
-    _active = None  # the operator instance whose bake is running (one at a time)
+        return _Running.job is not None
 
     def _report_result(self, report):
         for warning in report.get("warnings", []):
@@ -66,9 +77,8 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
         wm = context.window_manager
-        self._job = BakeJob(bake_input).start()
-        self._timer = wm.event_timer_add(TIMER_INTERVAL, window=context.window)
-        RADIOSITY_OT_bake._active = self
+        _Running.job = BakeJob(bake_input).start()
+        _Running.timer = wm.event_timer_add(TIMER_INTERVAL, window=context.window)
         wm.radiosity_progress = 0.0
         wm.radiosity_status = "Starting"
         wm.progress_begin(0.0, 1.0)
@@ -76,17 +86,33 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def modal(self, context, event):
+        job = _Running.job
+        if job is None:  # unregistered or finished elsewhere: nothing left to drive
+            return {"CANCELLED"}
+        try:
+            return self._step(context, event, job)
+        except Exception as exc:  # a bug: never leave the panel without its button
+            traceback.print_exc()
+            job.cancel()
+            _end_display(context)
+            _Running.clear()
+            self.report({"ERROR"}, f"Radiosity bake failed ({type(exc).__name__}): {exc}")
+            return {"CANCELLED"}
+
+    def _step(self, context, event, job):
         if event.type == "ESC" and event.value == "PRESS":
-            self._job.cancel()
+            job.cancel()
             context.window_manager.radiosity_status = "Cancelling"
             return {"RUNNING_MODAL"}
-        if event.type == "TIMER" and event.timer is self._timer:
-            job, wm = self._job, context.window_manager
+        # (bpy.types.Event has no 'timer' in 4.2 to 5.0: any TIMER tick refreshes; only ours
+        # fires every TIMER_INTERVAL, and an extra refresh costs nothing.)
+        if event.type == "TIMER":
+            wm = context.window_manager
             if job.done():
                 return self._finish(context)
             wm.progress_update(job.fraction)
             wm.radiosity_progress = 100.0 * job.fraction
-            wm.radiosity_status = job.message
+            wm.radiosity_status = "Cancelling" if job.cancelled else job.message
             if context.workspace is not None:
                 context.workspace.status_text_set(
                     f"Radiosity: {100 * job.fraction:.0f} % {job.message}  (Esc to cancel)")
@@ -97,24 +123,17 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
 
     def cancel(self, context):
         # Blender calls this when the window closes mid-bake: stop the worker, write nothing.
-        if self._job is not None:
-            self._job.cancel()
-            self._job.join(5.0)
-        self._finish(context)
+        if _Running.job is not None:
+            _Running.job.cancel()
+            _Running.job.join(5.0)
+        _end_display(context)
+        _Running.clear()
 
     def _finish(self, context):
         """The one exit of a modal bake: timer, progress and status always cleaned up."""
-        wm = context.window_manager
-        if self._timer is not None:
-            wm.event_timer_remove(self._timer)
-            self._timer = None
-        wm.progress_end()
-        wm.radiosity_status = ""
-        wm.radiosity_progress = 0.0
-        if context.workspace is not None:
-            context.workspace.status_text_set(None)
-        RADIOSITY_OT_bake._active = None
-        job, self._job = self._job, None
+        _end_display(context)
+        job = _Running.job
+        _Running.clear()
         if job is None:
             return {"CANCELLED"}
         if isinstance(job.error, BakeCancelled) or (job.cancelled and job.result is None):
@@ -130,6 +149,20 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
             return {"CANCELLED"}
         self._report_result(report)
         return {"FINISHED"}
+
+
+def _end_display(context):
+    """Remove the modal timer and the progress display (safe to call twice)."""
+    wm = context.window_manager
+    if _Running.timer is not None:
+        wm.event_timer_remove(_Running.timer)
+        _Running.timer = None
+    wm.progress_end()
+    if hasattr(wm, "radiosity_status"):
+        wm.radiosity_status = ""
+        wm.radiosity_progress = 0.0
+    if context.workspace is not None:
+        context.workspace.status_text_set(None)
 
 
 class RADIOSITY_OT_clear(bpy.types.Operator):
@@ -160,8 +193,17 @@ def register():
 
 
 def unregister():
-    if RADIOSITY_OT_bake._active is not None and RADIOSITY_OT_bake._active._job is not None:
-        RADIOSITY_OT_bake._active._job.cancel()
-    RADIOSITY_OT_bake._active = None
+    # A bake still running (quit or disable mid-bake): stop the worker; the modal handler ends
+    # itself on its next event. Nothing is written.
+    job = _Running.job
+    if job is not None:
+        job.cancel()
+        job.join(5.0)
+    if _Running.timer is not None:
+        try:
+            bpy.context.window_manager.event_timer_remove(_Running.timer)
+        except (AttributeError, ReferenceError, RuntimeError):
+            pass  # the window manager is already gone at quit
+    _Running.clear()
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)

@@ -1,8 +1,41 @@
-"""The sidebar panel (3D Viewport > Sidebar > Radiosity)."""
+"""The sidebar panel (3D Viewport > Sidebar > Radiosity) and its sub-panels.
+
+Laid out for the sidebar's default width: quality settings first, the bake button, then the
+display of the result; solver and scope settings fold away in "Advanced" (a layout panel), the
+last bake's figures in the "Last Bake" sub-panel. Labels are short enough not to be cut off at the
+default width (seen in the real-Blender UI tier's screenshots, tests/ui).
+"""
 
 import json
 
 import bpy
+
+#: Stage timings of the report, in the order a user reads them, with their labels (total first).
+STAGE_LABELS = (
+    ("total", "Total"),
+    ("read_scene", "Read scene"),
+    ("patches", "Make patches"),
+    ("form_factors", "Form factors"),
+    ("solve", "Solve"),
+    ("colours", "Vertex colours"),
+    ("write", "Write"),
+)
+
+#: Name of the colour attribute a bake writes (write.ATTRIBUTE, without importing bpy data code).
+ATTRIBUTE = "Radiosity"
+
+
+def _split_row(layout, label):
+    """A row with a label on the left and the widget's column on the right (returns the column)."""
+    split = layout.split(factor=0.42, align=True)
+    split.label(text=label)
+    return split.column(align=True)
+
+
+def has_bake(scene):
+    """True when a mesh of *scene* carries the baked colour attribute."""
+    return any(o.type == "MESH" and o.data is not None and ATTRIBUTE in o.data.color_attributes
+               for o in scene.objects)
 
 
 class VIEW3D_PT_radiosity(bpy.types.Panel):
@@ -15,26 +48,22 @@ class VIEW3D_PT_radiosity(bpy.types.Panel):
         from .operators import RADIOSITY_OT_bake
 
         layout = self.layout
-        layout.use_property_split = True
+        layout.use_property_split = False
         layout.use_property_decorate = False
         props = context.scene.radiosity
-        col = layout.column()
+        col = layout.column(align=True)
         col.prop(props, "patch_size")
-        col.prop(props, "method")
-        sub = col.column()
+        _split_row(layout, "Method").prop(props, "method", text="")
+        sub = layout.column()
         sub.active = props.method in ("HEMICUBE", "HYBRID")
-        sub.prop(props, "resolution")
-        col.prop(props, "solver")
-        col.prop(props, "corners")
-        col.prop(props, "refine_levels")
-        sub = col.column()
+        sub.prop(props, "resolution", text="Resolution")
+        _split_row(layout, "Corners").prop(props, "corners", text="")
+        col = layout.column(align=True)
+        sub = col.column(align=True)
         sub.active = props.corners == "GATHER"
-        sub.prop(props, "element_levels")
-        col.prop(props, "contact_cuts")
-        col.prop(props, "tolerance")
-        col.prop(props, "max_iterations")
-        col.prop(props, "selected_only")
-        col.prop(props, "make_single_user")
+        sub.prop(props, "element_levels", text="Receiver Levels")
+        col.prop(props, "refine_levels", text="Adaptive Levels")
+
         wm = context.window_manager
         if RADIOSITY_OT_bake.running():
             layout.prop(wm, "radiosity_progress", text=wm.radiosity_status or "Baking",
@@ -42,39 +71,101 @@ class VIEW3D_PT_radiosity(bpy.types.Panel):
             layout.label(text="Esc cancels", icon="INFO")
         else:
             layout.operator("radiosity.bake", icon="LIGHT_AREA")
-        row = layout.row(align=True)
-        row.prop(props, "show_bake")
-        row.operator("radiosity.clear", text="Clear Bake", icon="X")
-        layout.prop(context.scene.view_settings, "exposure", text="Display Exposure")
-        _draw_summary(layout, props.last_report)
+
+        box = layout.box()
+        if has_bake(context.scene):
+            row = box.row(align=True)
+            row.prop(props, "show_bake", text="Show")
+            row.operator("radiosity.clear", text="Clear", icon="X")
+            box.prop(context.scene.view_settings, "exposure", text="Exposure")
+        else:
+            box.label(text="No bake in this scene yet")
+
+        # A layout panel, folded by default; its open state is a window-manager property (not
+        # saved in the file), so scripts and the UI tier can unfold it too.
+        header, body = layout.panel_prop(wm, "radiosity_show_advanced")
+        header.label(text="Advanced")
+        if body is not None:
+            draw_advanced(body, props)
 
 
-def _draw_summary(layout, text):
+def draw_advanced(layout, props):
+    """Solver and scope settings (the folded part of the panel)."""
+    _split_row(layout, "Solver").prop(props, "solver", text="")
+    col = layout.column(align=True)
+    col.prop(props, "tolerance")
+    col.prop(props, "max_iterations", text="Iteration Cap")
+    col = layout.column()
+    col.prop(props, "contact_cuts")
+    col.prop(props, "selected_only")
+    col.prop(props, "make_single_user")
+
+
+class VIEW3D_PT_radiosity_last(bpy.types.Panel):
+    bl_label = "Last Bake"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Radiosity"
+    bl_parent_id = "VIEW3D_PT_radiosity"
+
+    @classmethod
+    def poll(cls, context):
+        scene = context.scene
+        return bool(scene is not None and summary_lines(scene.radiosity.last_report))
+
+    def draw(self, context):
+        col = self.layout.column(align=True)
+        for text, icon in summary_lines(context.scene.radiosity.last_report):
+            col.label(text=text, icon=icon)
+
+
+def summary_lines(text):
+    """The Last Bake lines, as (text, icon) pairs, from the JSON report (empty if none).
+
+    The total time comes first, then patches and solver figures, the stages in pipeline order
+    with human labels, and the warnings.
+    """
     if not text:
-        return
+        return []
     try:
         report = json.loads(text)
     except ValueError:
-        return
-    box = layout.box()
-    box.label(text="Last bake")
-    box.label(text=f"Patches: {report.get('patches', '?')}")
-    box.label(text=f"Iterations: {report.get('iterations', '?')}, "
-                   f"residual {report.get('residual', float('nan')):.2g}")
-    for stage, seconds in report.get("timings", {}).items():
-        box.label(text=f"{stage}: {seconds:.2f} s")
+        return []
+    if not isinstance(report, dict):
+        return []
+    timings = {k: v for k, v in (report.get("timings") or {}).items()
+               if isinstance(v, (int, float)) and not k.startswith("n_")}
+    lines = []
+    if "total" in timings:
+        lines.append((f"Total: {timings['total']:.2f} s", "TIME"))
+    lines.append((f"Patches: {report.get('patches', '?')}", "NONE"))
+    residual = report.get("residual")
+    res_text = f", residual {residual:.2g}" if isinstance(residual, (int, float)) else ""
+    lines.append((f"Iterations: {report.get('iterations', '?')}{res_text}", "NONE"))
+    known = dict(STAGE_LABELS)
+    for key, label in STAGE_LABELS[1:]:
+        if key in timings:
+            lines.append((f"{label}: {timings[key]:.2f} s", "NONE"))
+    for key, seconds in timings.items():
+        if key not in known:
+            lines.append((f"{key.replace('_', ' ').capitalize()}: {seconds:.2f} s", "NONE"))
     for warning in report.get("warnings", []):
-        box.label(text=warning, icon="ERROR")
+        lines.append((str(warning), "ERROR"))
+    return lines
 
 
-CLASSES = (VIEW3D_PT_radiosity,)
+CLASSES = (VIEW3D_PT_radiosity, VIEW3D_PT_radiosity_last)
 
 
 def register():
     for cls in CLASSES:
         bpy.utils.register_class(cls)
+    bpy.types.WindowManager.radiosity_show_advanced = bpy.props.BoolProperty(
+        name="Advanced", description="Show the solver and scope settings", default=False,
+        options={"SKIP_SAVE"})
 
 
 def unregister():
+    del bpy.types.WindowManager.radiosity_show_advanced
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)

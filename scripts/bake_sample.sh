@@ -14,4 +14,3 @@ mkdir -p out
   --output "out/${scene}_baked.blend" \
   --report "out/${scene}_report.json" \
   --render "out/${scene}.png" "$@"
-echo "wrote out/${scene}_baked.blend, out/${scene}_report.json, out/${scene}.png"

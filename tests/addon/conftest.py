@@ -43,7 +43,8 @@ def fresh_file(request):
 # The bpy 4.2 module can crash (SIGSEGV) while the interpreter shuts down, after every test has
 # passed and every report is written. So once pytest is completely done (unconfigure runs after
 # the terminal summary and the JUnit file), the process ends with pytest's own exit status
-# instead of going through Blender's exit handlers.
+# instead of going through Blender's exit handlers. Those handlers would also remove Blender's
+# session folder (/tmp/blender_*), so that is done here.
 _EXIT = {}
 
 
@@ -54,7 +55,11 @@ def pytest_sessionfinish(session, exitstatus):
 @pytest.hookimpl(trylast=True)
 def pytest_unconfigure(config):
     if "status" in _EXIT and bpy.app.version < (5, 0, 0):
+        import shutil
         import sys
         sys.stdout.flush()
         sys.stderr.flush()
+        tmp = bpy.app.tempdir
+        if tmp and os.path.basename(os.path.normpath(tmp)).startswith("blender_"):
+            shutil.rmtree(tmp, ignore_errors=True)
         os._exit(_EXIT["status"])

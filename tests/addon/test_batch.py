@@ -198,3 +198,101 @@ def test_render_needs_a_camera(package, tmp_path):
     line = one_error_line(run_batch(src, "--output", tmp_path / "o.blend", "--render",
                                     tmp_path / "x.png"))
     assert "camera" in line
+
+
+def test_console_names_no_temporary_file_and_no_egl_noise(package, tmp_path):
+    src = tmp_path / "scene.blend"
+    save_scene(src)
+    bpy.ops.wm.open_mainfile(filepath=str(src))
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    cam.location = (0.0, 0.0, 3.0)
+    bpy.context.scene.collection.objects.link(cam)
+    bpy.context.scene.camera = cam
+    bpy.ops.wm.save_mainfile()
+    os.remove(tmp_path / "scene.blend1")  # Blender's backup of the first save
+    proc = run_batch(src, "--output", tmp_path / "o.blend", "--render", tmp_path / "o.png",
+                     "--report", tmp_path / "o.json")
+    assert proc.returncode == 0, proc.stderr
+    console = proc.stdout + proc.stderr
+    for noise in (".radiosity-", "Saved copy", "EGL", "Saved:"):
+        assert noise not in console, console
+    said = [ln for ln in proc.stdout.splitlines() if ln.startswith("radiosity-batch: ")]
+    assert [ln.split(" -> ")[1] for ln in said] == [str(tmp_path / n)
+                                                    for n in ("o.blend", "o.png", "o.json")]
+    assert sorted(os.listdir(tmp_path)) == ["o.blend", "o.json", "o.png", "scene.blend"]
+
+
+@pytest.mark.parametrize("option, given, expect", [
+    ("--report", "missing/r.json", "the folder missing does not exist"),
+    ("--render", "missing/x.png", "the folder missing does not exist"),
+    ("--output", "missing/o.blend", "the folder missing does not exist"),
+    ("--report", "folder", "is a folder"),
+    ("--report", "o.blend", "the same file as --output"),
+])
+def test_output_paths_are_checked_before_the_bake(package, tmp_path, option, given, expect):
+    src = tmp_path / "scene.blend"
+    save_scene(src)
+    (tmp_path / "folder").mkdir()
+    args = ["--output", "o.blend"] if option != "--output" else []
+    proc = subprocess.run([sys.executable, BATCH, str(src), *args, option, given],
+                          capture_output=True, text=True, timeout=120, cwd=str(tmp_path))
+    line = one_error_line(proc)
+    assert f"{option} {given}: {expect}" in line, line
+    assert ".radiosity-" not in proc.stdout + proc.stderr
+    assert "baked" not in proc.stdout  # stopped before the bake: nothing written
+    assert sorted(os.listdir(tmp_path)) == ["folder", "scene.blend"]
+
+
+def test_forgotten_double_dash_says_what_to_type(package, tmp_path):
+    src = tmp_path / "scene.blend"
+    save_scene(src)
+    # What a user types when they forget '--' (here run by the bpy module, which sees the same
+    # argv a blender executable would hand to the script).
+    line = one_error_line(run_batch("--background", src, "--python", BATCH,
+                                    "--output", tmp_path / "o.blend"))
+    assert "put -- between" in line
+    assert f"--python {BATCH} -- --output {tmp_path / 'o.blend'}" in line
+    assert not (tmp_path / "o.blend").exists()
+
+
+def test_missing_numpy_exits_non_zero_and_says_how_to_get_it(package, tmp_path):
+    src = tmp_path / "scene.blend"
+    save_scene(src)
+    blocker = ("import runpy, sys; sys.modules['numpy'] = None; "  # import numpy -> ImportError
+               "sys.argv = sys.argv[1:]; runpy.run_path(sys.argv[0], run_name='__main__')")
+    proc = subprocess.run([sys.executable, "-c", blocker, BATCH, str(src), "--output",
+                           str(tmp_path / "o.blend")], capture_output=True, text=True,
+                          timeout=120, cwd=ROOT)
+    line = one_error_line(proc)
+    assert "NumPy is missing" in line and "python3-numpy" in line
+    assert "Traceback" not in proc.stderr
+    assert not (tmp_path / "o.blend").exists()
+
+
+def test_batch_leaves_no_blender_folder_in_tmp(package, tmp_path):
+    src, tmp = tmp_path / "scene.blend", tmp_path / "tmp"
+    save_scene(src)
+    tmp.mkdir()
+    env = dict(os.environ, TMPDIR=str(tmp), TMP=str(tmp), TEMP=str(tmp))
+    for args in (["--output", tmp_path / "o.blend"], ["--output", tmp_path / "none" / "o.blend"]):
+        subprocess.run([sys.executable, BATCH, str(src), *map(str, args)], capture_output=True,
+                       timeout=120, env=env, cwd=ROOT)
+    assert (tmp_path / "o.blend").exists()
+    assert os.listdir(tmp) == []
+    # ... and Blender does put its session folder there (so the check above means something).
+    where = subprocess.run([sys.executable, "-c", "import bpy; print(bpy.app.tempdir)"],
+                           capture_output=True, text=True, timeout=60, env=env).stdout
+    assert where.strip().startswith(os.path.join(str(tmp), "blender_"))
+
+
+def test_readme_caption_states_the_samples_own_settings(package):
+    """The picture caption quotes what the sample fixes, no counts that drift with the core."""
+    import re
+
+    with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as fh:
+        caption = fh.read().split("](docs/images/cornell_box.png)", 1)[1].split("\n\n", 2)[1]
+    bpy.ops.wm.open_mainfile(filepath=CORNELL, load_ui=False)
+    resolution = int(re.search(r"hemicube R = (\d+)", caption).group(1))
+    assert resolution == bpy.context.scene.radiosity.resolution
+    assert bpy.context.scene.radiosity.corners == "GATHER" and "gathered at every vertex" in caption
+    assert not re.search(r"\d[\d,]* (patches|receiver elements)", caption), caption

@@ -5,6 +5,7 @@ Runs under bpy 5.0.1 (.venv) and bpy 4.2 LTS (.venv-bpy42), the oldest Blender t
 
 import glob
 import os
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -84,17 +85,26 @@ INSTALL_SCRIPT = textwrap.dedent("""
     addon_utils.disable(mods[0])
     assert not hasattr(bpy.types.Scene, "radiosity")
     print("INSTALLED-OK")
+    # The bpy 4.2 module can crash while the interpreter shuts down, before Blender removes its
+    # session folder: remove it and leave at once.
+    import os, shutil
+    sys.stdout.flush()
+    shutil.rmtree(bpy.app.tempdir, ignore_errors=True)
+    os._exit(0)
 """)
 
 
 def test_zip_installs_registers_and_bakes(built_zip, tmp_path):
-    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "user"))
+    (tmp_path / "tmp").mkdir()
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "user"),
+               TMPDIR=str(tmp_path / "tmp"))
     script = tmp_path / "install.py"
     script.write_text(INSTALL_SCRIPT)
     proc = subprocess.run([sys.executable, str(script), built_zip], capture_output=True,
                           text=True, timeout=180, env=env, cwd=str(tmp_path))
     assert "INSTALLED-OK" in proc.stdout, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert os.path.isdir(tmp_path / "user" / "extensions" / "user_default" / "radiosity_baker")
+    assert os.listdir(tmp_path / "tmp") == []  # Blender's session folder is gone
 
 
 def _registered_state():
@@ -103,6 +113,7 @@ def _registered_state():
     return (hasattr(bpy.types.Scene, "radiosity"),
             hasattr(bpy.types.WindowManager, "radiosity_progress"),
             hasattr(bpy.types.WindowManager, "radiosity_status"),
+            hasattr(bpy.types.WindowManager, "radiosity_show_advanced"),
             "bake" in dir(bpy.ops.radiosity),
             all(cls.is_registered for cls in classes),
             any(cls.is_registered for cls in classes))
@@ -113,12 +124,44 @@ def test_register_unregister_twice_leaves_nothing_behind():
     if was:  # the session's registration (other test modules) is restored at the end
         PACKAGE.unregister()
     try:
-        assert _registered_state() == (False,) * 6
+        assert _registered_state() == (False,) * 7
         for _ in range(2):
             PACKAGE.register()
-            assert _registered_state() == (True,) * 6
+            assert _registered_state() == (True,) * 7
             PACKAGE.unregister()
-            assert _registered_state() == (False,) * 6
+            assert _registered_state() == (False,) * 7
     finally:
         if was:
             PACKAGE.register()
+
+
+def readme_install_blocks():
+    """The ```sh blocks of README.md's Install section, as shell text."""
+    with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as fh:
+        text = fh.read()
+    section = text.split("### Install", 1)[1].split("\n### ", 1)[0]
+    return [b.split("\n", 1)[1] for b in section.split("```")[1::2] if b.startswith("sh\n")]
+
+
+def fresh_clone(dest):
+    """The repository's tracked files copied to *dest* (what a fresh clone holds: no dist/)."""
+    files = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True,
+                           text=True).stdout.split("\0")
+    for name in filter(None, files):
+        target = os.path.join(dest, name)
+        os.makedirs(os.path.dirname(target), exist_ok=True)
+        if os.path.isfile(os.path.join(ROOT, name)):
+            shutil.copy2(os.path.join(ROOT, name), target)
+    return dest
+
+
+def test_readme_build_command_works_in_a_fresh_clone(tmp_path):
+    blocks = [b for b in readme_install_blocks() if b.startswith("mkdir -p dist\n.venv/")]
+    assert len(blocks) == 1, readme_install_blocks()
+    clone = fresh_clone(str(tmp_path / "clone"))
+    assert not os.path.exists(os.path.join(clone, "dist"))
+    os.symlink(os.path.join(ROOT, ".venv"), os.path.join(clone, ".venv"))
+    proc = subprocess.run(["bash", "-euc", blocks[0]], cwd=clone, capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert len(glob.glob(os.path.join(clone, "dist", "radiosity_baker-*.zip"))) == 1

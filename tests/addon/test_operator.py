@@ -571,24 +571,147 @@ class _Layout:
         self.log = log
 
     def __getattr__(self, name):
-        if name in ("column", "row", "box"):
+        if name in ("column", "row", "box", "split"):
             return lambda *a, **k: self
+        if name == "panel_prop":  # a layout panel: header and (unfolded) body
+            return lambda *a, **k: (self, self)
         if name in ("prop", "operator", "label"):
             return lambda *a, **k: self.log.append((name, a, k)) or self
         raise AttributeError(name)
 
 
+def _draw_panels():
+    """Everything the panel and its sub-panels draw: [(kind, args, kwargs)]."""
+    log = []
+    panels = PACKAGE.radiosity_addon.panels
+    for cls in panels.CLASSES:
+        if hasattr(cls, "poll") and not cls.poll(bpy.context):
+            continue
+        cls.draw(type("P", (), {"layout": _Layout(log)})(), bpy.context)
+    return log
+
+
 def test_panel_draws_every_setting_the_button_and_the_summary(package):
     light_over_floor()
+    before = _draw_panels()
+    drawn = [a[1] for kind, a, _ in before if kind == "prop"]
+    # Before any bake there is nothing to show: no Show toggle that claims a bake is shown.
+    assert "show_bake" not in drawn and "exposure" not in drawn
     bake_ok(patch_size=0.5, resolution=16)
-    log = []
-    panel = type("P", (), {"layout": _Layout(log)})()
-    PACKAGE.radiosity_addon.panels.VIEW3D_PT_radiosity.draw(panel, bpy.context)
-    props = [a[1] for kind, a, _ in log if kind == "prop"]
-    for name in ("patch_size", "method", "resolution", "solver", "tolerance", "max_iterations",
-                 "selected_only", "make_single_user", "show_bake", "exposure"):
-        assert name in props
-    assert ("operator", ("radiosity.bake",), {"icon": "LIGHT_AREA"}) in log
+    log = _draw_panels()
+    drawn = [a[1] for kind, a, _ in log if kind == "prop"]
+    settings = [p.identifier for p in bpy.context.scene.radiosity.bl_rna.properties
+                if p.identifier not in ("rna_type", "name", "last_report", "show_bake")]
+    for name in settings + ["show_bake", "exposure"]:
+        assert name in drawn, name
+    # Quality settings come first, the advanced ones after the bake button (folded sub-panel).
+    order = [a[1] if kind == "prop" else a[0] for kind, a, _ in log if kind in ("prop", "operator")]
+    assert order.index("patch_size") == 0
+    assert order.index("radiosity.bake") < order.index("solver")
+    assert bpy.context.window_manager.radiosity_show_advanced is False  # folded by default
     labels = [k.get("text", "") for kind, a, k in log if kind == "label"]
-    assert any(t.startswith("Patches: ") for t in labels)
-    assert any(t.startswith("Iterations: ") for t in labels)
+    total = [i for i, t in enumerate(labels) if t.startswith("Total: ")]
+    patches = [i for i, t in enumerate(labels) if t.startswith("Patches: ")]
+    assert total and patches and total[0] < patches[0]
+    assert any(t.startswith("Form factors: ") for t in labels)
+    assert not any(t.startswith(("form_factors", "read_scene", "total")) for t in labels)
+
+
+def test_summary_lines_put_the_total_first_with_human_labels():
+    report = {"patches": 12, "iterations": 3, "residual": 1e-5, "warnings": ["w"],
+              "timings": {"patches": 0.5, "total": 2.0, "form_factors": 1.0, "n_rays": 9,
+                          "solve": 0.25, "read_scene": 0.125, "mystery_stage": 0.0625}}
+    lines = [t for t, _ in PACKAGE.radiosity_addon.panels.summary_lines(json.dumps(report))]
+    assert lines[0] == "Total: 2.00 s"
+    assert lines.index("Read scene: 0.12 s") < lines.index("Make patches: 0.50 s") \
+        < lines.index("Form factors: 1.00 s") < lines.index("Solve: 0.25 s")
+    assert "Mystery stage: 0.06 s" in lines and lines[-1] == "w"
+    assert not any("n_rays" in t or "9" == t[-1] for t in lines)
+    assert PACKAGE.radiosity_addon.panels.summary_lines("not json") == []
+
+
+class _Event:
+    """What the modal handler reads of a bpy.types.Event: type and value, nothing more (no
+    'timer': Event has none in 4.2 to 5.0)."""
+
+    __slots__ = ("type", "value")
+
+    def __init__(self, type_, value="NOTHING"):
+        self.type, self.value = type_, value
+
+
+class _Operator:
+    """Stands in for the operator instance (the bpy module never runs a modal operator)."""
+
+    def __init__(self):
+        self.reports = []
+
+    def report(self, kind, text):
+        self.reports.append((set(kind), text))
+
+
+def _start_modal():
+    ops = PACKAGE.radiosity_addon.operators
+    ctx = bpy.context
+    bake_input = job.prepare(ctx, job.options_from_props(ctx.scene.radiosity))
+    ops._Running.job = job.BakeJob(bake_input).start()
+    return ops
+
+
+def test_modal_timer_ticks_drive_the_bake_to_its_end(package):
+    floor, lamp = light_over_floor()
+    set_settings(bpy.context.scene, patch_size=0.5, resolution=16)
+    ops = _start_modal()
+    assert ops.RADIOSITY_OT_bake.running() and not ops.RADIOSITY_OT_bake.poll(bpy.context)
+    me = _Operator()
+    t0, result = time.perf_counter(), None
+    while time.perf_counter() - t0 < 60:
+        result = _modal(me, _Event("TIMER"))
+        if result != {"PASS_THROUGH"}:
+            break
+        time.sleep(0.02)
+    assert result == {"FINISHED"}, me.reports
+    assert "Radiosity" in floor.data.color_attributes
+    assert not ops.RADIOSITY_OT_bake.running() and ops.RADIOSITY_OT_bake.poll(bpy.context)
+    assert any(t.startswith("Radiosity baked: ") for _, t in me.reports)
+
+
+def test_modal_escape_cancels_and_changes_nothing(package):
+    light_over_floor(floor_size=4.0)
+    set_settings(bpy.context.scene, patch_size=0.05, resolution=64)
+    before = _snapshot()
+    ops = _start_modal()
+    me = _Operator()
+    assert _modal(me, _Event("ESC", "PRESS")) == {"RUNNING_MODAL"}
+    t0, result = time.perf_counter(), None
+    while time.perf_counter() - t0 < 5:
+        result = _modal(me, _Event("TIMER"))
+        if result != {"PASS_THROUGH"}:
+            break
+        time.sleep(0.02)
+    assert result == {"CANCELLED"} and time.perf_counter() - t0 < 1.0
+    assert not ops.RADIOSITY_OT_bake.running()
+    assert _snapshot() == before
+    assert any("cancelled" in t for _, t in me.reports)
+
+
+def test_unregister_mid_bake_stops_the_worker(package):
+    light_over_floor(floor_size=4.0)
+    set_settings(bpy.context.scene, patch_size=0.05, resolution=64)
+    ops = _start_modal()
+    work = ops._Running.job
+    PACKAGE.unregister()
+    try:
+        assert work.done() and work.cancelled and not ops.RADIOSITY_OT_bake.running()
+    finally:
+        PACKAGE.register()
+
+
+def _modal(me, event):
+    """Call the operator's modal with a stand-in instance (its helpers bound to it)."""
+    ops = PACKAGE.radiosity_addon.operators
+    cls = ops.RADIOSITY_OT_bake
+    me._step = cls._step.__get__(me)
+    me._finish = cls._finish.__get__(me)
+    me._report_result = cls._report_result.__get__(me)
+    return cls.modal(me, bpy.context, event)

@@ -1,0 +1,242 @@
+"""Blender-side driver of the UI tier: a user's session in a real Blender window (under Xvfb).
+
+Run by tests/ui/session.sh inside the Debian 13 root::
+
+    blender sample_blends/cornell_box.blend --python tests/ui/drive.py -- OUT_DIR
+
+Steps run from ``bpy.app.timers`` (the event loop keeps running between them, as for a user):
+open the sidebar on the Radiosity tab, start the bake as the button does (``INVOKE_DEFAULT`` in
+the 3D view's context), press Esc with xdotool in the middle, start it again and watch the progress
+until it ends, toggle Show Bake, take screenshots with ImageMagick's ``import -window root``,
+disable and re-enable the extension, and quit in the middle of a third bake. Every observation
+goes to OUT_DIR/results.json; tests/ui/test_ui.py judges them. Nothing here asserts.
+"""
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+import time
+import traceback
+
+import bpy
+import numpy as np
+
+OUT = os.path.abspath(sys.argv[sys.argv.index("--") + 1])
+MODULE = "bl_ext.user_default.radiosity_baker"
+#: Seconds between progress samples.
+SAMPLE = 0.05
+#: Progress (%) at which Esc is pressed during the first bake.
+ESC_AT = 1.0
+#: Give up waiting on any one step after this many seconds.
+STEP_LIMIT = 240.0
+
+results = {"steps": [], "error": None}
+
+
+def save():
+    with open(os.path.join(OUT, "results.json"), "w", encoding="utf-8") as fh:
+        json.dump(results, fh, indent=1)
+
+
+def view3d():
+    """(window, area, UI region, WINDOW region) of the first 3D viewport."""
+    window = bpy.context.window_manager.windows[0]
+    area = next(a for a in window.screen.areas if a.type == "VIEW_3D")
+    ui = next(r for r in area.regions if r.type == "UI")
+    main = next(r for r in area.regions if r.type == "WINDOW")
+    return window, area, ui, main
+
+
+def running():
+    wm = bpy.context.window_manager
+    return bool(getattr(wm, "radiosity_status", ""))
+
+
+def snapshot():
+    """Every mesh's size, positions hash and colour attributes, and the object-to-mesh links."""
+    state = {}
+    for obj in bpy.data.objects:
+        state["object:" + obj.name] = obj.data.name if obj.data else None
+    for mesh in bpy.data.meshes:
+        co = np.empty(len(mesh.vertices) * 3, np.float32)
+        mesh.vertices.foreach_get("co", co)
+        state["mesh:" + mesh.name] = [len(mesh.vertices), len(mesh.polygons),
+                                      hashlib.sha1(co.tobytes()).hexdigest(),
+                                      sorted(a.name for a in mesh.color_attributes)]
+    state["last_report"] = bpy.context.scene.radiosity.last_report
+    return state
+
+
+def shading():
+    _, area, _, _ = view3d()
+    s = area.spaces[0].shading
+    return {"type": s.type, "color_type": s.color_type, "light": s.light}
+
+
+def xdotool(*args):
+    return subprocess.run(["xdotool", *args], capture_output=True, text=True, timeout=10)
+
+
+def press_escape():
+    """Esc as a user presses it: pointer over the 3D view of the focused Blender window."""
+    window, area, _, main = view3d()
+    wid = xdotool("search", "--onlyvisible", "--name", "Blender").stdout.split()
+    if not wid:
+        return "no Blender window found by xdotool"
+    wid = wid[0]
+    x = main.x + main.width // 2
+    y = window.height - (main.y + main.height // 2)
+    out = [xdotool("windowfocus", "--sync", wid),
+           xdotool("mousemove", "--window", wid, str(x), str(y)),
+           xdotool("key", "Escape")]
+    return "; ".join(r.stderr.strip() for r in out if r.returncode) or "ok"
+
+
+def screenshot(name):
+    path = os.path.join(OUT, name)
+    r = subprocess.run(["import", "-window", "root", path], capture_output=True, text=True,
+                       timeout=30)
+    results.setdefault("screenshots", {})[name] = r.returncode == 0 and os.path.isfile(path)
+    return path
+
+
+def invoke_bake():
+    window, area, ui, _ = view3d()
+    with bpy.context.temp_override(window=window, area=area, region=ui):
+        return sorted(bpy.ops.radiosity.bake("INVOKE_DEFAULT"))
+
+
+def redraw():
+    for area in bpy.context.window_manager.windows[0].screen.areas:
+        area.tag_redraw()
+
+
+def scenario():
+    """A generator of waits (seconds): each yield hands control back to Blender's event loop."""
+    yield 1.0
+    prefs = bpy.context.preferences
+    results["addon_enabled"] = MODULE in prefs.addons
+    results["blender"] = bpy.app.version_string
+    window, area, ui, main = view3d()
+    area.spaces[0].show_region_ui = True
+    area.spaces[0].region_3d.view_perspective = "CAMERA"  # Numpad 0: look through the camera
+    yield 0.5
+    ui.active_panel_category = "Radiosity"
+    redraw()
+    yield 0.5
+    results["sidebar"] = {"category": ui.active_panel_category, "width": ui.width,
+                          "ui_scale": prefs.system.ui_scale}
+    results["shading_before"] = shading()
+    results["show_bake_drawn_before"] = None
+    screenshot("before_bake.png")
+    before = snapshot()
+
+    # 1. Bake, then Esc in the middle.
+    results["invoke_1"] = invoke_bake()
+    t0 = time.perf_counter()
+    seen = []
+    while running() and time.perf_counter() - t0 < STEP_LIMIT:
+        seen.append(bpy.context.window_manager.radiosity_progress)
+        if seen[-1] >= ESC_AT:
+            break
+        yield SAMPLE
+    results["progress_before_esc"] = seen
+    results["escape"] = press_escape()
+    t_esc = time.perf_counter()
+    while running() and time.perf_counter() - t_esc < 10.0:
+        yield 0.02
+    results["cancel_seconds"] = time.perf_counter() - t_esc
+    results["running_after_esc"] = running()
+    yield 0.3
+    results["unchanged_after_cancel"] = snapshot() == before
+    results["shading_after_cancel"] = shading()
+
+    # 2. Bake to the end, sampling the progress the panel shows.
+    results["invoke_2"] = invoke_bake()
+    t0 = time.perf_counter()
+    samples = []
+    shot = False
+    while running() and time.perf_counter() - t0 < STEP_LIMIT:
+        wm = bpy.context.window_manager
+        samples.append([time.perf_counter() - t0, wm.radiosity_progress, wm.radiosity_status])
+        if not shot and wm.radiosity_progress > 20.0:
+            redraw()
+            yield 0.2
+            screenshot("during_bake.png")
+            shot = True
+        yield SAMPLE
+    results["bake_seconds"] = time.perf_counter() - t0
+    results["progress"] = samples
+    yield 0.3
+    meshes = {}
+    for obj in bpy.context.scene.objects:
+        if obj.type != "MESH" or not obj.visible_get():
+            continue
+        attr = obj.data.color_attributes.get("Radiosity")
+        if attr is None:
+            meshes[obj.name] = None
+            continue
+        buf = np.empty(len(attr.data) * 4, np.float32)
+        attr.data.foreach_get("color", buf)
+        rgb = buf.reshape(-1, 4)[:, :3]
+        meshes[obj.name] = {"min": float(rgb.min()), "max": float(rgb.max()),
+                            "finite": bool(np.isfinite(rgb).all()), "corners": len(attr.data)}
+    results["baked"] = meshes
+    results["last_report"] = bpy.context.scene.radiosity.last_report
+    results["show_bake_prop"] = bpy.context.scene.radiosity.show_bake
+    results["shading_after_bake"] = shading()
+    bpy.context.scene.radiosity.show_bake = False
+    yield 0.2
+    results["shading_show_off"] = shading()
+    bpy.context.scene.radiosity.show_bake = True
+    redraw()
+    yield 1.0
+    results["shading_show_on"] = shading()
+    screenshot("after_bake.png")
+    # Unfold Advanced (as a click on its header does) to see its labels at the default width.
+    results["advanced_folded"] = not bpy.context.window_manager.radiosity_show_advanced
+    bpy.context.window_manager.radiosity_show_advanced = True
+    redraw()
+    yield 1.0
+    screenshot("advanced_open.png")
+
+    # 3. Disable and enable the extension (unregister, register) as Preferences does.
+    bpy.ops.preferences.addon_disable(module=MODULE)
+    yield 0.3
+    results["registered_after_disable"] = hasattr(bpy.types.Scene, "radiosity")
+    bpy.ops.preferences.addon_enable(module=MODULE)
+    yield 0.3
+    results["registered_after_enable"] = hasattr(bpy.types.Scene, "radiosity")
+
+    # 4. Quit in the middle of a bake (unregister with a running worker).
+    bpy.context.scene.radiosity.patch_size = bpy.context.scene.radiosity.patch_size / 2
+    results["invoke_3"] = invoke_bake()
+    yield 0.5
+    results["running_at_quit"] = running()
+    results["finished"] = True
+    save()
+    print("UI-DRIVER: quitting", flush=True)
+    bpy.ops.wm.quit_blender()
+
+
+_steps = scenario()
+
+
+def tick():
+    try:
+        wait = next(_steps)
+    except StopIteration:
+        return None
+    except Exception:  # recorded for the test, and Blender quits so the run never hangs
+        results["error"] = traceback.format_exc()
+        save()
+        bpy.ops.wm.quit_blender()
+        return None
+    save()
+    return wait
+
+
+os.makedirs(OUT, exist_ok=True)
+bpy.app.timers.register(tick, first_interval=1.0, persistent=True)

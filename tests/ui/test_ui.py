@@ -1,0 +1,151 @@
+"""The UI tier: a user's session in a real Blender 4.3 window (Debian 13's package, under Xvfb).
+
+The extension is built, validated and installed by Blender's own command line, the bake is started
+the way the panel's button starts it and cancelled with a real Esc key press (xdotool), and every
+observation of tests/ui/drive.py is judged here. Runs inside the cached Debian root of
+scripts/real_blender.sh (needs root); if the root cannot be made the tier fails, it never skips.
+Artefacts (screenshots, Blender's logs, results.json) stay in out/ui/.
+"""
+
+import json
+import os
+import subprocess
+
+import numpy as np
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+OUT = os.path.join(ROOT, "out", "ui")
+#: Esc must stop a bake within this many seconds (wall clock, key press to the panel's idle state).
+CANCEL_LIMIT = 1.0
+#: The whole session (root build excluded) must end within this many seconds.
+SESSION_LIMIT = 900
+#: A screenshot counts as not blank above this grey-level standard deviation (0..255).
+MIN_PIXEL_STD = 10.0
+#: ... and with at least this many distinct colours.
+MIN_COLOURS = 200
+LOGS = ("build.log", "validate.log", "install.log", "blender.log")
+
+
+@pytest.fixture(scope="module")
+def session():
+    """Run the Blender session once; return (results dict, {log name: text})."""
+    os.makedirs(OUT, exist_ok=True)
+    for name in os.listdir(OUT):  # the last session's artefacts (out/ui/cli is test_batch_cli's)
+        if name.endswith((".png", ".log", ".json", ".rc")):
+            os.remove(os.path.join(OUT, name))
+    cmd = ["bash", os.path.join(ROOT, "scripts", "real_blender.sh"),
+           "sh", "tests/ui/session.sh", "out/ui"]
+    proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=SESSION_LIMIT)
+    if proc.returncode != 0:
+        pytest.fail(f"the real-Blender session did not run (exit {proc.returncode}):\n"
+                    f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}", pytrace=False)
+    logs = {}
+    for name in LOGS + ("blender.rc",):
+        path = os.path.join(OUT, name)
+        logs[name] = open(path, encoding="utf-8", errors="replace").read() \
+            if os.path.isfile(path) else ""
+    path = os.path.join(OUT, "results.json")
+    if not os.path.isfile(path):
+        pytest.fail(f"Blender wrote no results; its output:\n{logs['blender.log'][-3000:]}",
+                    pytrace=False)
+    with open(path, encoding="utf-8") as fh:
+        results = json.load(fh)
+    return results, logs
+
+
+def test_driver_ran_to_the_end(session):
+    results, logs = session
+    assert results["error"] is None, results["error"]
+    assert results.get("finished") is True, logs["blender.log"][-2000:]
+
+
+def test_extension_built_validated_installed_by_blenders_cli(session):
+    results, logs = session
+    assert "created:" in logs["build.log"] and ".zip" in logs["build.log"]
+    assert "Success parsing TOML" in logs["validate.log"]
+    assert 'Installed "radiosity_baker"' in logs["install.log"]
+    assert results["blender"].startswith("4.3")
+    assert results["addon_enabled"] is True
+
+
+def test_button_bakes_with_progress_and_writes_colours(session):
+    results, _ = session
+    assert results["invoke_2"] == ["RUNNING_MODAL"]
+    progress = np.array([p for _, p, _ in results["progress"]])
+    assert len(progress) > 5
+    assert np.all(np.diff(progress) >= 0), "progress went backwards"
+    inside = np.unique(progress[(progress > 0) & (progress < 100)])
+    assert len(inside) >= 3, f"progress did not advance in steps: {inside}"
+    assert progress.max() > 50
+    statuses = {s for _, _, s in results["progress"]}
+    assert len(statuses) >= 3, statuses
+    baked = results["baked"]
+    assert baked, "no visible meshes"
+    for name, stats in baked.items():
+        assert stats is not None, f"{name} has no Radiosity attribute"
+        assert stats["finite"] and stats["min"] >= 0 and stats["max"] > 0, (name, stats)
+    report = json.loads(results["last_report"])
+    assert report["patches"] > 0 and report["timings"]["total"] > 0
+
+
+def test_escape_cancels_within_a_second_and_changes_nothing(session):
+    results, _ = session
+    assert results["invoke_1"] == ["RUNNING_MODAL"]
+    assert results["progress_before_esc"][-1] > 0, "Esc must land in the middle of the bake"
+    assert results["escape"] == "ok"
+    assert results["running_after_esc"] is False
+    assert results["cancel_seconds"] < CANCEL_LIMIT
+    assert results["unchanged_after_cancel"] is True
+    assert results["shading_after_cancel"] == results["shading_before"]
+
+
+def test_show_bake_switches_the_viewport(session):
+    results, _ = session
+    before = results["shading_before"]
+    assert before["color_type"] != "VERTEX"
+    assert results["show_bake_prop"] is True
+    assert results["shading_after_bake"] == {"type": "SOLID", "color_type": "VERTEX",
+                                             "light": "FLAT"}
+    assert results["shading_show_off"]["color_type"] != "VERTEX"
+    assert results["shading_show_on"] == results["shading_after_bake"]
+
+
+def test_advanced_settings_start_folded(session):
+    results, _ = session
+    assert results["advanced_folded"] is True
+
+
+def test_register_unregister_and_quit_mid_bake_leave_no_traceback(session):
+    results, logs = session
+    assert results["registered_after_disable"] is False
+    assert results["registered_after_enable"] is True
+    assert results["running_at_quit"] is True
+    assert logs["blender.rc"].strip() == "0"
+    assert "Blender quit" in logs["blender.log"]
+    for name in LOGS:
+        for bad in ("Traceback", "ReferenceError", "Error:"):
+            assert bad not in logs[name], f"{bad!r} in {name}:\n{logs[name][-3000:]}"
+
+
+@pytest.mark.parametrize("name", ["before_bake.png", "during_bake.png", "after_bake.png",
+                                  "advanced_open.png"])
+def test_screenshot_is_not_blank(session, name):
+    from PIL import Image
+
+    results, _ = session
+    assert results["screenshots"][name] is True
+    img = np.asarray(Image.open(os.path.join(OUT, name)).convert("RGB"))
+    assert img.shape[:2] == (800, 1280)
+    assert img.std() > MIN_PIXEL_STD
+    assert len(np.unique(img.reshape(-1, 3), axis=0)) > MIN_COLOURS
+
+
+def test_baked_screenshot_shows_the_colours(session):
+    """The viewport area changes from material shading to the baked colours."""
+    from PIL import Image
+
+    before = np.asarray(Image.open(os.path.join(OUT, "before_bake.png")).convert("RGB"), float)
+    after = np.asarray(Image.open(os.path.join(OUT, "after_bake.png")).convert("RGB"), float)
+    view = (slice(150, 600), slice(100, 700))  # inside the camera frame of the 3D view
+    assert np.abs(after[view] - before[view]).mean() > 5.0
