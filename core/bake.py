@@ -225,7 +225,7 @@ class BakeSettings:
     # --- adaptive output mesh (issue 9): defaults measured in bench/bench_adaptive.py
     output: str = "mesh"
     contrast: float = 0.1
-    min_element: float = 0.02
+    min_element: float = 0.05
     vertex_budget: int = 200_000
 
     def __post_init__(self):
