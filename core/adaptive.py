@@ -154,13 +154,20 @@ def unlit_late_nodes(scene, patches, active, late, resolution):
     return ~face_reached[f] & big[f]
 
 
+class _Lines:
+    """Segments (a, u unit, w unit in-plane normal, length) with a distance tolerance."""
+
+    def __init__(self, a, u, w, length, tol):
+        self.a, self.u, self.w, self.length, self.tol = a, u, w, length, tol
+
+
 def contact_points(points, lines, chunk=PAIR_CHUNK):
-    """(V,) bool: points within the contacts' tolerance of one of their lines.
+    """(V,) bool: points within the lines' tolerance of one of their segments.
 
     Parameters
     ----------
     points : (V, 3) float64
-    lines : core.contacts.Contacts or None
+    lines : core.contacts.Contacts, _Lines or None
     """
     out = np.zeros(points.shape[0], dtype=bool)
     if lines is None or lines.a.shape[0] == 0 or points.shape[0] == 0:
@@ -179,6 +186,39 @@ def contact_points(points, lines, chunk=PAIR_CHUNK):
             & (t >= -tol) & (t <= length[None] + tol)
         out[s:s + step] = on.any(axis=1)
     return out
+
+
+def contact_edges(scene, tree, contacts):
+    """The level-0 edges of ``tree`` that run along a contact line, as :class:`_Lines`.
+
+    A box whose outline follows the patch edges crosses no patch, so its lines are not among
+    ``contacts``' segments; its outline vertices are (``contacts.vertices``). An edge between two
+    such points (or points on a crossing line) is taken as part of the outline, so the points
+    later put on it gather per corner too. (An edge across a footprint between two outline
+    points is taken too: its points then gather per corner, which is only slower.)
+    """
+    if contacts is None:
+        return None
+    P = tree.points
+    flagged = scene.vertices[np.flatnonzero(contacts.vertices)]
+    on = contact_points(P, contacts)
+    if flagged.shape[0]:
+        both = np.concatenate([flagged, P])
+        _, inv = np.unique(both, axis=0, return_inverse=True)
+        inv = inv.reshape(-1)
+        on |= np.isin(inv[flagged.shape[0]:], inv[:flagged.shape[0]])
+    a = tree.leaves
+    b = np.roll(a, -1, axis=1)
+    edge = (a != b) & on[a] & on[b]
+    leaf = np.nonzero(edge)[0]
+    pa, pb = P[a[edge]], P[b[edge]]
+    d = pb - pa
+    length = np.linalg.norm(d, axis=1)
+    ok = length > 0
+    u = d[ok] / length[ok, None]
+    w = np.cross(np.asarray(tree.normals)[leaf[ok]], u)
+    w /= np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-300)
+    return _Lines(pa[ok], u, w, length[ok], contacts.tol)
 
 
 class _Emitters:
@@ -472,13 +512,14 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
     emitters = _Emitters(scene, patches, np.random.default_rng([settings.seed, 4]))
     cache = _Cache(2 * seen.areas.size)
     tree = ElementTree.from_patches(scene, patches)
+    outline = contact_edges(scene, tree, contacts)
     steps = []
     budget_hit = False
     for level in range(MAX_LEVELS + 1):
         t0 = time.perf_counter()
         conf = tree.conforming()
         leaf_scene = _leaf_scene(scene, tree, conf)
-        alone = contact_points(tree.points, contacts)
+        alone = contact_points(tree.points, contacts) | contact_points(tree.points, outline)
         groups = corner_groups(leaf_scene, crease_angle=settings.crease_angle, alone=alone)
         keys, vertex = _group_keys(leaf_scene, groups, alone)
         ids = cache.lookup(keys)
@@ -503,9 +544,9 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
             inc[pos_in_new[s:s + GATHER_BATCH]] = vals.astype(np.float64) @ seen_L[cols]
             batches.append((pos_in_new[s:s + GATHER_BATCH], cols, vals))
             if gather_monitor is not None:
-                gather_monitor.update(min(1.0 - 0.5 ** level * (1.0 - (s + g.size) / go.size)
-                                          * 0.5, 0.99), f"mesh: level {level}, "
-                                      f"{tree.points.shape[0]} points")
+                done = (s + g.size) / go.size        # level k fills [1 - 2^-k, 1 - 2^-(k+1)]
+                gather_monitor.update(1.0 - 0.5 ** level * (1.0 - 0.5 * done),
+                                      f"mesh: level {level}, {tree.points.shape[0]} points")
         if go.size:
             vis[pos_in_new] = emitters.visibility(groups.points[go], groups.normals[go])
         gathered = np.zeros(new.size, dtype=bool)
@@ -549,6 +590,9 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
     report = dict(levels=steps, leaves=int(tree.leaves.shape[0]),
                   points=int(tree.points.shape[0]), budget_hit=budget_hit,
                   per_object=per_object_report(scene, mesh))
+    if elements is not None:
+        report["elements"] = dict(elements=int(elements.parent.size),
+                                  gathered=int(elements.computed.size), levels=elements.levels)
     return mesh, state, report
 
 
@@ -616,6 +660,10 @@ def mesh_colours(scene, settings, patches, node_radiance, incident, state, conta
                                    corner_colours=state.colours(scene, node_radiance))
         state = AdaptiveState(**{**state.__dict__, "mesh": mesh})
         report = dict(rebuilt=False, per_object=per_object_report(scene, mesh))
+        if state.elements is not None:
+            e = state.elements
+            report["elements"] = dict(elements=int(e.parent.size), gathered=int(e.computed.size),
+                                      levels=e.levels)
     else:
         mesh, state, report = adaptive_output(scene, settings, patches, node_radiance, incident,
                                               contacts=contacts, monitor=monitor)

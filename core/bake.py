@@ -891,6 +891,7 @@ def _run(scene, settings, patches, store, active, monitor, timings, t_start, war
             scene, settings, patches, node_radiance, incident, gather, contact_lines, monitor,
             lambda: corner_colours(scene, patches, patch_radiance,
                                    crease_angle=settings.crease_angle))
+        element_report = mesh_report.pop("elements", None)
     elif settings.corners == "gather":
         from .gather import corner_groups, gather_rows, gathered_colours
         if gather is None:
