@@ -55,7 +55,7 @@ def main():
     args = ap.parse_args()
     runs = [dict()]
     if not args.quick:
-        runs += [dict(contrast=0.2), dict(contrast=0.05), dict(min_element=0.05),
+        runs += [dict(contrast=0.2), dict(contrast=0.05), dict(min_element=0.02),
                  dict(min_element=0.1), dict(contrast=0.2, min_element=0.05)]
     q = one_quad_scene()
     qp = floor_points(20)
