@@ -440,8 +440,10 @@ def mesh_colours(scene, settings, patches, node_radiance, incident, state, conta
             report["elements"] = dict(elements=int(e.parent.size), gathered=int(e.computed.size),
                                       levels=e.levels)
     else:
+        rebuilt = isinstance(state, AdaptiveState)       # a relight that lights new patches
         mesh, state, report = adaptive_output(scene, settings, patches, node_radiance, incident,
                                               contacts=contacts, monitor=monitor)
+        report["rebuilt"] = rebuilt
     colours = np.zeros((scene.n_corners, 3))
     has = state.user >= 0
     colours[has] = mesh.corner_colours[state.user[has]]
