@@ -671,7 +671,9 @@ def relight(result, *, reflectance=None, emission=None, progress=None, cancel=No
 
     Nodes that become emitters but were never reached get their rows computed (only those
     rows). A matrix-free (progressive) bake kept no form factors: it is recomputed from scratch
-    and the report says so.
+    and the report says so. With ``output='mesh'`` the output mesh is kept (placed where the
+    bake's light changed) and re-shaded from its kept gather rows; if the new light reaches
+    patches the bake did not light, the mesh is rebuilt (report ``mesh.rebuilt``).
 
     Parameters
     ----------
