@@ -6,11 +6,12 @@ are re-exported here; see README.md for a runnable example and docs/design.md fo
 
 from .bake import BakeResult, bake, form_factor_matrix, relight
 from .errors import BakeCancelled, RadiosityError, SceneError, SettingsError
+from .outmesh import OutputMesh
 from .scene import Scene, make_scene, scene_from_polygons
 from .settings import BakeSettings
 
 __all__ = [
     "BakeCancelled", "RadiosityError", "SceneError", "SettingsError",
-    "Scene", "make_scene", "scene_from_polygons",
+    "OutputMesh", "Scene", "make_scene", "scene_from_polygons",
     "BakeResult", "BakeSettings", "bake", "form_factor_matrix", "relight",
 ]

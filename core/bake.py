@@ -20,7 +20,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .adaptive import coarse_patch_size, mesh_colours
+from .colours import corner_colours
 from .contacts import find_contacts, split_at_contacts
+from .criteria import face_variation, unlit_late_nodes
 from .patches import make_patches, subdivide_patches
 from .pipeline import check_result, colours, form_factors, make_gather, node_arrays, solve
 from .progress import Monitor
@@ -55,7 +58,11 @@ class BakeResult:
         ``solver``, ``iterations``, ``residual``, ``converged``, ``timings``, ``energy``,
         ``form_factor_bytes`` (rows kept for relight; 0 after a matrix-free bake),
         ``matrix_bytes`` (the dense matrix built for the solve, or the row cache of a
-        matrix-free solve; freed after it), ``warnings``).
+        matrix-free solve; freed after it), ``warnings``; ``mesh`` with ``output='mesh'``:
+        see :func:`core.adaptive.adaptive_output`; ``face_variation`` with
+        ``output='vertices'``: see :func:`core.criteria.face_variation`).
+    output : core.outmesh.OutputMesh or None
+        The radiosity mesh (``output='mesh'``); None with ``output='vertices'``.
     """
 
     corner_colours: np.ndarray
@@ -64,6 +71,7 @@ class BakeResult:
     patches: object
     report: dict
     _state: object = field(default=None, repr=False)
+    output: object = None
 
 
 @dataclass(frozen=True)
@@ -75,8 +83,9 @@ class _State:
     patches: object
     store: object                 # core.rows.RowStore, or None after a matrix-free solve
     active: np.ndarray
-    gather: object = None         # core.pipeline.Gather, or None
+    gather: object = None         # core.pipeline.Gather, core.adaptive.AdaptiveState or None
     on_contact: np.ndarray = None  # (V,) bool: vertices on a contact line, gathered per corner
+    contact_lines: object = None  # core.contacts.Contacts ('mesh' output), or None
 
 
 def bake(scene, settings=None, *, progress=None, cancel=None):
@@ -101,6 +110,9 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     if not isinstance(settings, BakeSettings):
         raise TypeError(f"settings must be a BakeSettings; got {type(settings).__name__}")
     t_start = time.perf_counter()
+    if settings.patch_size is None:
+        settings = dataclasses.replace(settings, patch_size=0.5 if settings.output == "vertices"
+                                       else coarse_patch_size(scene))
 
     levels = settings.refine_levels
     level_monitor = _LevelMonitor(progress, cancel, 0, levels + 1)
@@ -108,7 +120,7 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     level_monitor.update(0.0, "patches")
     t0 = time.perf_counter()
     patches = make_patches(scene, settings.patch_size)
-    contacts = on_contact = None
+    contacts = on_contact = found = None
     if settings.contact_cuts:
         found = find_contacts(scene, patches)
         patches, _, contacts = split_at_contacts(scene, patches, found)
@@ -117,16 +129,17 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     level_monitor.update(1.0, f"{len(patches.areas)} patches")
 
     result = _run(scene, settings, patches, level_monitor, t_start=t_start,
-                  timings={"patches": t_patches}, on_contact=on_contact)
+                  timings={"patches": t_patches}, on_contact=on_contact, contact_lines=found)
     if levels:
         result = _refine(scene, settings, patches, result, on_contact, progress, cancel,
-                         t_start)
+                         t_start, found)
     if contacts is not None:
         result.report["contacts"] = contacts
     return result
 
 
-def _refine(scene, settings, patches, result, on_contact, progress, cancel, t_start):
+def _refine(scene, settings, patches, result, on_contact, progress, cancel, t_start,
+            contact_lines):
     """Adaptive refinement after the first solve: split and re-solve, ``refine_levels`` times."""
     levels = settings.refine_levels
     steps = [dict(level=0, patches=int(len(patches.areas)), split=0)]
@@ -146,7 +159,8 @@ def _refine(scene, settings, patches, result, on_contact, progress, cancel, t_st
                           split=int(np.count_nonzero(mask))))
         level_monitor = _LevelMonitor(progress, cancel, level, levels + 1)
         result = _run(scene, settings, patches, level_monitor, t_start=time.perf_counter(),
-                      timings={"patches": t_split}, on_contact=on_contact)
+                      timings={"patches": t_split}, on_contact=on_contact,
+                      contact_lines=contact_lines)
         for key, value in result.report["timings"].items():
             total[key] = total.get(key, 0.0) + value
     total["total"] = time.perf_counter() - t_start
@@ -218,14 +232,15 @@ def relight(result, *, reflectance=None, emission=None, progress=None, cancel=No
         monitor.update(1.0, "patches")
         return _run(new_scene, state.settings, state.patches, monitor, t_start=t_start,
                     timings={"patches": 0.0}, on_contact=state.on_contact,
-                    warnings=["relight: the bake kept no form factors (matrix-free "
+                    contact_lines=state.contact_lines, warnings=["relight: the bake kept no form factors (matrix-free "
                               "progressive): they were recomputed"])
     return _run(new_scene, state.settings, state.patches, monitor, t_start=t_start,
-                timings={"patches": 0.0}, kept=state, on_contact=state.on_contact)
+                timings={"patches": 0.0}, kept=state, on_contact=state.on_contact,
+                contact_lines=state.contact_lines)
 
 
 def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_contact=None,
-         warnings=()):
+         contact_lines=None, warnings=()):
     """Form factors (reusing ``kept``'s rows), solve, colours: the stages of core.pipeline.
 
     ``timings`` and ``warnings`` are what came before (patches); the result's report holds
@@ -238,10 +253,15 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     monitor.stage(*_STAGES["form_factors"])
     monitor.update(0.0, "form factors")
     t0 = time.perf_counter()
+    skip_late = None
+    if settings.output == "mesh":          # unlit surfaces cost nothing (core.criteria)
+        def skip_late(active, late):
+            return unlit_late_nodes(scene, patches, active, late, settings.resolution)
     if kept is None:
-        ff = form_factors(patches, nodes, settings, monitor)
+        ff = form_factors(patches, nodes, settings, monitor, skip_late=skip_late)
     else:
-        ff = form_factors(patches, nodes, settings, monitor, kept.store, kept.active)
+        ff = form_factors(patches, nodes, settings, monitor, kept.store, kept.active,
+                          skip_late=skip_late)
     monitor.update(1.0, "form factors done")
     timings["form_factors"] = time.perf_counter() - t0
 
@@ -256,9 +276,18 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     monitor.update(0.0, "colours")
     t0 = time.perf_counter()
     gather = kept.gather if kept is not None else None
-    if settings.corners == "gather" and gather is None:
-        gather = make_gather(scene, patches, sol.node_radiance, settings, monitor, on_contact)
-    corner, element_report = colours(scene, patches, sol.node_radiance, settings, gather)
+    mesh = mesh_report = None
+    if settings.output == "mesh":
+        corner, mesh, gather, mesh_report = mesh_colours(
+            scene, settings, patches, sol.node_radiance, sol.incident, gather, contact_lines,
+            monitor, lambda: corner_colours(scene, patches, sol.node_radiance[:P],
+                                            crease_angle=settings.crease_angle))
+        element_report = mesh_report.pop("elements", None)
+    else:
+        if settings.corners == "gather" and gather is None:
+            gather = make_gather(scene, patches, sol.node_radiance, settings, monitor,
+                                 on_contact)
+        corner, element_report = colours(scene, patches, sol.node_radiance, settings, gather)
     timings["colours"] = time.perf_counter() - t0
     monitor.update(1.0, "done")
     timings["total"] = time.perf_counter() - t_start
@@ -282,6 +311,13 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     )
     if element_report is not None:
         report["elements"] = element_report
-    state = _State(scene, settings, patches, sol.store, ff.active, gather, on_contact)
     patch_radiance = sol.node_radiance[:P].copy()
-    return BakeResult(corner, patch_radiance, sol.node_radiance, patches, report, state)
+    if mesh_report is not None:
+        report["mesh"] = mesh_report
+    else:
+        report["face_variation"] = face_variation(scene, patches, patch_radiance,
+                                                  settings.contrast)
+    state = _State(scene, settings, patches, sol.store, ff.active, gather, on_contact,
+                   contact_lines)
+    return BakeResult(corner, patch_radiance, sol.node_radiance, patches, report, state,
+                      output=mesh)

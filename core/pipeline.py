@@ -124,8 +124,12 @@ class FormFactors:
     batch: int
 
 
-def form_factors(patches, nodes, settings, monitor, store=None, active=None):
-    """Discovery from the emitters (only from new ones when ``store`` holds a bake's rows)."""
+def form_factors(patches, nodes, settings, monitor, store=None, active=None, *, skip_late=None):
+    """Discovery from the emitters (only from new ones when ``store`` holds a bake's rows).
+
+    ``skip_late(active, late) -> (len(late),) bool``: front nodes that get no late row (the
+    radiosity mesh skips unlit surfaces: :func:`core.criteria.unlit_late_nodes`).
+    """
     P = len(patches.areas)
     N = 2 * P
     rng = np.random.default_rng(settings.seed)
@@ -150,6 +154,8 @@ def form_factors(patches, nodes, settings, monitor, store=None, active=None):
     # active row" alone would leave it black. What these late rows hit is not added: a node
     # that only unlit nodes see (the inside of a box, seen from the floor under it) stays out.
     late = np.flatnonzero(~active[:P])
+    if skip_late is not None and len(late):
+        late = late[~skip_late(active, late)]
     if len(late) and not overflow:
         active, overflow = discover(store, rows_fn, nodes.allowed, active, late, monitor,
                                     settings.memory_budget, batcher, expand=False)

@@ -39,11 +39,17 @@ class _Parser(argparse.ArgumentParser):
         raise BatchError(f"bad option: {message}")
 
 
+#: What an ``auto`` row's option returns for ``auto`` (None means "not given").
+AUTO = "auto"
+
+
 def _option_type(row):
     """argparse type of a settings row: parse, then check against the row (one range)."""
     parse = int if row.type == "int" else float
 
     def convert(text):
+        if row.auto and text.strip().lower() == "auto":
+            return AUTO
         try:
             return row.check(parse(text))
         except ValueError as exc:      # core.SettingsError is a ValueError
@@ -67,6 +73,8 @@ def add_option(parser, row):
             metavar = f"{row.low}..{row.high}"
         else:
             metavar = row.unit.upper() if row.unit and " " not in row.unit else "N"
+            if row.auto:
+                metavar += "|auto"
         parser.add_argument(flag, type=_option_type(row), metavar=metavar, help=text)
 
 
@@ -272,7 +280,7 @@ def run(argv):
     for key in CORE_OPTIONS + ("selected_only", "make_single_user"):
         value = getattr(args, key)
         if value is not None:
-            options[key] = value
+            options[key] = None if value is AUTO else value
     try:
         report = bake_now(bpy.context, options)
     except BakeError as exc:

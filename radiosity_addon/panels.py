@@ -51,13 +51,19 @@ class VIEW3D_PT_radiosity(bpy.types.Panel):
         layout.use_property_split = False
         layout.use_property_decorate = False
         props = context.scene.radiosity
+        _split_row(layout, "Output").prop(props, "output", text="")
         col = layout.column(align=True)
         col.prop(props, "patch_size")
+        sub = col.column(align=True)
+        sub.active = props.output == "MESH"
+        sub.prop(props, "contrast")
         _split_row(layout, "Method").prop(props, "method", text="")
         sub = layout.column()
         sub.active = props.method in ("HEMICUBE", "HYBRID")
         sub.prop(props, "resolution", text="Resolution")
-        _split_row(layout, "Corners").prop(props, "corners", text="")
+        row = _split_row(layout, "Corners")
+        row.active = props.output == "VERTICES"
+        row.prop(props, "corners", text="")
         col = layout.column(align=True)
         sub = col.column(align=True)
         sub.active = props.corners == "GATHER"
@@ -92,6 +98,10 @@ class VIEW3D_PT_radiosity(bpy.types.Panel):
 def draw_advanced(layout, props):
     """Solver and scope settings (the folded part of the panel)."""
     _split_row(layout, "Solver").prop(props, "solver", text="")
+    col = layout.column(align=True)
+    col.active = props.output == "MESH"
+    col.prop(props, "min_element")
+    col.prop(props, "vertex_budget")
     col = layout.column(align=True)
     col.prop(props, "tolerance")
     col.prop(props, "max_iterations", text="Iteration Cap")

@@ -5,6 +5,8 @@ with ``exposed=True``) and the add-on's own rows (:data:`ADDON_OPTIONS`): one de
 option, shared with the batch command line and the report.
 """
 
+import dataclasses
+
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
@@ -38,6 +40,8 @@ def from_blender(row, value, unit_scale=1.0):
     """
     if row.type == "choice":
         return value.lower()
+    if row.auto and value == 0:       # the panel shows "auto" as 0
+        return None
     if row.is_length:
         return value * unit_scale
     return value
@@ -54,6 +58,10 @@ def _make_even(name):
 def make_property(row):
     """The bpy property of one settings row (label, tooltip, default, bounds, unit)."""
     common = dict(name=row.label, description=row.help)
+    default = row.default
+    if row.auto:                      # None ("auto") is 0 in the panel
+        default = 0 if default is None else default
+        row = dataclasses.replace(row, open_low=False)
     if row.type == "bool":
         return BoolProperty(default=row.default, **common)
     if row.type == "choice":
@@ -68,12 +76,12 @@ def make_property(row):
     if row.type == "int":
         if row.even:
             limits.update(step=2, update=_make_even(row.name))
-        return IntProperty(default=row.default, **limits, **common)
+        return IntProperty(default=default, **limits, **common)
     if row.digits is not None:
         limits["precision"] = row.digits
     if row.is_length:
         limits.update(subtype="DISTANCE", unit="LENGTH")
-    return FloatProperty(default=row.default, **limits, **common)
+    return FloatProperty(default=default, **limits, **common)
 
 
 def _show_bake_changed(self, context):

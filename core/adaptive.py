@@ -1,0 +1,455 @@
+"""The adaptive radiosity mesh: receiver elements refined where the light changes, as the output.
+
+Substructuring (Cohen, Greenberg, Immel & Brock 1986): the solve stays on the coarse patches;
+the *elements* of a :class:`core.hierarchy.ElementTree` built from them are receivers only. Each
+level, the radiance is gathered at the element vertices the level added (a hemicube at the point
+over the solved patches, :mod:`core.gather`: the values already gathered stay valid), and the
+leaves are split where
+
+* the luminance differs between the leaf's vertices by more than ``contrast`` relative to the
+  brighter one, never relative to less than ``DARK_FLOOR`` x the scene's mean luminance, so that
+  darkness does not refine for ever (contrast-driven meshing, Lightscape, Blender 2.4x);
+* the emitters' visibility differs between the leaf's vertices (a shadow boundary passes: one
+  shadow ray from every vertex to each of ``SHADOW_SAMPLES`` fixed points on the emitters) and
+  the contrast exceeds ``SHADOW_CONTRAST`` x ``contrast``;
+* a contact line runs along the leaf (the light falls off steeply towards an object's foot) and
+  the leaf is larger than ``CONTACT_ELEMENT``;
+
+(the criteria and their constants: :mod:`core.criteria`), never below ``min_element`` and
+within ``vertex_budget`` points, worst first (score: the leaf's
+area times how far it is over the threshold).
+
+The output is the conforming triangulation of the leaves (``tree.conforming()``): every output
+corner gathers as a corner of that triangulation, seen as a scene of its own (the leaves'
+faces inherit material and object from their parent faces), so creases, material edges and
+contact-line vertices split per corner exactly as at the user's own vertices.
+
+A point none of whose adjacent patches receives any light is not gathered (its radiance is its
+emission): surfaces no light reaches cost no hemicube.
+"""
+
+import dataclasses
+import time
+
+import numpy as np
+
+from .criteria import (EmitterSamples, contact_edges, contact_points, dark_floor, luminance,
+                       per_leaf_scores)
+from .elements import make_elements
+from .gather import NORMAL_DECIMALS, corner_groups, shade
+from .hemicube import point_rows
+from .hierarchy import ElementTree, output_mesh
+from .progress import SubMonitor
+from .rows import RowStore, compact_rows
+from .scene import make_scene
+
+#: Default coarse patch size (m) of the mesh output, clamped to the scene's bounding diagonal
+#: times [COARSE_MIN_FRACTION, COARSE_MAX_FRACTION]: 1 m keeps a room's walls at a few dozen
+#: patches (the solve carries the energy, the elements carry the detail), a 4 m model gets
+#: 0.5 m patches (diag / 8), a 400 m site 1 m.
+COARSE_PATCH = 1.0
+COARSE_MIN_FRACTION = 1.0 / 400.0
+COARSE_MAX_FRACTION = 1.0 / 8.0
+
+#: Refinement stops after this many levels (a 1 m patch halved 12 times is 0.24 mm).
+MAX_LEVELS = 12
+
+#: Estimated new points of one leaf split (a quad adds its centre and four shared midpoints,
+#: a triangle three shared midpoints; 2:1 balancing adds some more): used to pick how many
+#: leaves fit in the budget. The split is retried with fewer leaves if the estimate was short.
+POINTS_PER_SPLIT = 4.0
+BUDGET_RETRIES = 6
+
+#: Hemicubes per point_rows call.
+GATHER_BATCH = 64
+
+#: Inset directions of per-corner (alone) gathers are matched after rounding to these decimals.
+DIRECTION_DECIMALS = 2
+
+OUTPUTS = ("mesh", "vertices")
+
+
+def coarse_patch_size(scene, patch_size=None):
+    """Patch size (m) the solve starts from when the output is the adaptive mesh.
+
+    ``patch_size`` given: used as is. None: ``COARSE_PATCH`` clamped to the bounding diagonal
+    times [``COARSE_MIN_FRACTION``, ``COARSE_MAX_FRACTION``].
+    """
+    if patch_size is not None:
+        return float(patch_size)
+    diag = scene.bounding_diagonal()
+    return float(np.clip(COARSE_PATCH, COARSE_MIN_FRACTION * diag, COARSE_MAX_FRACTION * diag))
+
+
+class _Seen:
+    """The patches a gather draws (what :func:`core.hemicube.point_rows` reads), a subset."""
+
+    def __init__(self, patches, keep):
+        self.keep = keep
+        self.centres = patches.centres[keep]
+        self.normals = patches.normals[keep]
+        self.corners = patches.corners[keep]
+        self.areas = patches.areas[keep]
+
+    def radiance(self, node_radiance):
+        """(2K, 3) radiance of the kept nodes from the full (2P, 3)."""
+        P = node_radiance.shape[0] // 2
+        return np.concatenate([node_radiance[self.keep], node_radiance[P + self.keep]])
+
+
+def _seen_subset(patches, radiance, power):
+    """The patches the gathers draw: those whose front or back node has light.
+
+    A patch that light never reaches on either side cannot stand between a lit point and a lit
+    patch (the lit patch would light it), so leaving it out changes no row that matters, and
+    a 100 x 100 m ground plane outside a closed room no longer slows every hemicube.
+    """
+    P = patches.areas.size
+    has = np.any(radiance[:P] > 0, axis=1) | np.any(radiance[P:] > 0, axis=1) \
+        | np.any(power[:P] > 0, axis=1) | np.any(power[P:] > 0, axis=1)
+    return _Seen(patches, np.flatnonzero(has))
+
+
+class AdaptiveState:
+    """What relight needs: the output mesh and the gather rows of its corner groups.
+
+    Attributes
+    ----------
+    mesh : core.outmesh.OutputMesh
+    entry : (C_out,) int64
+        Gathered point (index into ``material`` and ``rows``) of every output corner.
+    material : (U,) int64
+    rows : core.rows.RowStore
+        Point-to-node rows of the U points (against the nodes the gathers saw: the solved
+        patches, or the receiver elements); points that no light reached have none.
+    lit : (P,) bool
+        Patches that received light in the bake (relight rebuilds the mesh if more do).
+    elements : core.elements.Elements or None
+    seen : _Seen
+        The (lit) patches or elements the gathers drew.
+    user : (C,) int64
+        Output corner whose colour each user corner takes (-1: none, a dropped face).
+    """
+
+    def __init__(self, **kw):
+        self.__dict__.update(kw)
+
+    def colours(self, scene, node_radiance):
+        """(C_out, 3) output corner colours for the solved ``node_radiance`` (2P, 3)."""
+        L = node_radiance
+        if self.elements is not None:
+            L = self.elements.node_radiance(scene, node_radiance)
+        inc = self.rows.incident(self.seen.radiance(L))
+        return shade(scene, self.material, inc)[self.entry]
+
+
+def _leaf_scene(scene, tree, conf):
+    """The conforming triangulation of the leaves as a Scene of its own."""
+
+    leaf = conf["face_leaf"]
+    return make_scene(tree.points, conf["corner_verts"], conf["face_starts"], conf["face_sizes"],
+                      np.asarray(tree.material)[leaf], scene.reflectance, scene.emission,
+                      face_objects=scene.face_objects[conf["face_parent"]],
+                      object_names=scene.object_names, material_names=scene.material_names,
+                      back_reflectance=scene.back_reflectance, back_emission=scene.back_emission)
+
+
+class _Cache:
+    """Gathered groups, keyed by (point, material, normal, inset direction of alone groups)."""
+
+    def __init__(self, n_nodes):
+        self.keys = np.zeros((0, 8))
+        self.incident = np.zeros((0, 3))
+        self.vis = np.zeros(0, dtype=np.int64)
+        self.gathered = np.zeros(0, dtype=bool)
+        self.batches = []                      # (key ids (S,), cols (K,), vals (S, K) f32)
+        self.n_nodes = n_nodes
+
+    def lookup(self, keys):
+        """Index of every key row in the cache (-1: new)."""
+        if self.keys.shape[0] == 0:
+            return np.full(keys.shape[0], -1, dtype=np.int64)
+        both = np.concatenate([self.keys, keys])
+        _, inv = np.unique(both, axis=0, return_inverse=True)
+        inv = inv.reshape(-1)
+        where = np.full(inv.max() + 1, -1, dtype=np.int64)
+        where[inv[:self.keys.shape[0]]] = np.arange(self.keys.shape[0])
+        return where[inv[self.keys.shape[0]:]]
+
+    def add(self, keys, incident, vis, gathered):
+        start = self.keys.shape[0]
+        self.keys = np.concatenate([self.keys, keys])
+        self.incident = np.concatenate([self.incident, incident])
+        self.vis = np.concatenate([self.vis, vis])
+        self.gathered = np.concatenate([self.gathered, gathered])
+        return np.arange(start, start + keys.shape[0])
+
+    def rows_for(self, ids):
+        """GatherRows whose group g is cache entry ``ids[g]`` (``ids`` distinct; entries never
+        gathered get no row: their incident light is zero)."""
+        store = RowStore(ids.size, self.n_nodes)
+        pos = np.full(self.keys.shape[0], -1, dtype=np.int64)
+        pos[ids] = np.arange(ids.size)
+        for kid, cols, vals in self.batches:
+            g = pos[kid]
+            ok = g >= 0
+            if ok.any():
+                store.add_compact(g[ok], cols, vals[ok])
+        return store
+
+
+def _group_keys(leaf_scene, groups, alone):
+    """(G, 8) float64 cache keys of the corner groups, and the vertex of each group."""
+    ok = np.flatnonzero(groups.group >= 0)
+    G = groups.points.shape[0]
+    vertex = np.zeros(G, dtype=np.int64)
+    vertex[groups.group[ok]] = leaf_scene.corner_verts[ok]
+    direction = groups.points - leaf_scene.vertices[vertex]
+    length = np.linalg.norm(direction, axis=1, keepdims=True)
+    direction = np.divide(direction, length, out=np.zeros_like(direction), where=length > 0)
+    direction[~alone[vertex]] = 0.0
+    keys = np.concatenate([vertex[:, None].astype(np.float64),
+                           groups.material[:, None].astype(np.float64),
+                           np.round(groups.normals, NORMAL_DECIMALS),
+                           np.round(direction, DIRECTION_DECIMALS)], axis=1)
+    return keys, vertex
+
+
+def _split_within(tree, score, budget):
+    """Split the worst leaves that fit in ``budget`` points; None when none fits."""
+    cand = np.flatnonzero(score > 0)
+    cand = cand[np.argsort(-score[cand], kind="stable")]
+    n_fit = int((budget - tree.points.shape[0]) // POINTS_PER_SPLIT)
+    take = cand[:max(n_fit, 0)]
+    for _ in range(BUDGET_RETRIES):
+        if take.size == 0:
+            return None
+        mask = np.zeros(tree.leaves.shape[0], dtype=bool)
+        mask[take] = True
+        new, _ = tree.split(mask)
+        if new.points.shape[0] <= budget:
+            return new, int(take.size)
+        take = take[:take.size // 2]
+    return None
+
+
+def adaptive_output(scene, settings, patches, node_radiance, incident, *, contacts=None,
+                    monitor=None):
+    """Refine the receiver elements where the light changes; gather at their vertices.
+
+    Parameters
+    ----------
+    scene : core.scene.Scene
+    settings : core.bake.BakeSettings
+        Uses ``contrast``, ``min_element``, ``vertex_budget``, ``crease_angle``,
+        ``element_levels``/``element_threshold`` (the receiver elements the gathers see),
+        ``resolution``, ``rotate_hemicube``, ``seed``.
+    patches : core.patches.Patches
+        The solved patches (P).
+    node_radiance : (2P, 3) float64
+        Solved radiance.
+    incident : (2P, 3) float64
+        Power arriving at every node: points next to no lit patch are not gathered.
+    contacts : core.contacts.Contacts, optional
+        Contact lines: points on them gather per corner and leaves along them refine.
+    monitor : core.progress.Monitor or SubMonitor, optional
+
+    Returns
+    -------
+    mesh : core.outmesh.OutputMesh
+    state : AdaptiveState
+    report : dict
+        ``levels`` (per level: leaves, points, split, gathered, unlit (points not gathered),
+        marked by contrast / shadow / contact, seconds), ``leaves``, ``points``, ``budget_hit``.
+    """
+
+    L = np.asarray(node_radiance, dtype=np.float64)
+    P = patches.areas.size
+    elements, seen, seen_L = None, patches, L
+    gather_monitor = monitor
+    if settings.element_levels:
+        elements = make_elements(
+            scene, patches, L, levels=settings.element_levels,
+            threshold=settings.element_threshold, crease_angle=settings.crease_angle,
+            resolution=settings.resolution, rotate=settings.rotate_hemicube,
+            rng=np.random.default_rng([settings.seed, 3]),
+            monitor=None if monitor is None else SubMonitor(monitor, 0.0, 0.2))
+        seen, seen_L = elements.patches, elements.node_radiance(scene, L)
+        gather_monitor = None if monitor is None else SubMonitor(monitor, 0.2, 1.0)
+    power = np.asarray(incident)
+    if elements is not None:                 # an element has light if its patch has
+        power = np.concatenate([power[elements.parent], power[P + elements.parent]])
+    seen = _seen_subset(seen, seen_L, power)
+    seen_L = seen.radiance(seen_L)
+    emission = np.asarray(scene.emission)
+    lit = np.any(np.asarray(incident)[:P] > 0, axis=1) \
+        | np.any(emission[patches.material] > 0, axis=1)
+    floor = dark_floor(patches, L[:P], scene)
+    rng = np.random.default_rng([settings.seed, 2])
+    emitters = EmitterSamples(scene, patches, np.random.default_rng([settings.seed, 4]))
+    cache = _Cache(2 * seen.areas.size)
+    tree = ElementTree.from_patches(scene, patches)
+    outline = contact_edges(scene, tree, contacts)
+    steps = []
+    budget_hit = False
+    for level in range(MAX_LEVELS + 1):
+        t0 = time.perf_counter()
+        conf = tree.conforming()
+        leaf_scene = _leaf_scene(scene, tree, conf)
+        alone = contact_points(tree.points, contacts) | contact_points(tree.points, outline)
+        groups = corner_groups(leaf_scene, crease_angle=settings.crease_angle, on_contact=alone)
+        keys, _ = _group_keys(leaf_scene, groups, alone)
+        ids = cache.lookup(keys)
+        new = np.flatnonzero(ids < 0)
+        # Points next to no lit patch see no light: no hemicube.
+        ok = np.flatnonzero(groups.group >= 0)
+        face_of = np.repeat(np.arange(conf["face_sizes"].size), conf["face_sizes"])
+        corner_patch = np.asarray(tree.leaf_patch)[conf["face_leaf"][face_of]]
+        group_lit = np.zeros(groups.points.shape[0], dtype=bool)
+        np.logical_or.at(group_lit, groups.group[ok], lit[corner_patch[ok]])
+        go = new[group_lit[new]]
+        inc = np.zeros((new.size, 3))
+        vis = np.zeros(new.size, dtype=np.int64)
+        batches = []
+        pos_in_new = np.searchsorted(new, go)
+        for s in range(0, go.size, GATHER_BATCH):
+            g = go[s:s + GATHER_BATCH]
+            rows = point_rows(seen, groups.points[g], groups.normals[g],
+                              resolution=settings.resolution, rotate=settings.rotate_hemicube,
+                              rng=rng)
+            cols, vals = compact_rows(rows)
+            inc[pos_in_new[s:s + GATHER_BATCH]] = vals.astype(np.float64) @ seen_L[cols]
+            batches.append((pos_in_new[s:s + GATHER_BATCH], cols, vals))
+            if gather_monitor is not None:
+                done = (s + g.size) / go.size        # level k fills [1 - 2^-k, 1 - 2^-(k+1)]
+                gather_monitor.update(1.0 - 0.5 ** level * (1.0 - 0.5 * done),
+                                      f"mesh: level {level}, {tree.points.shape[0]} points")
+        if go.size:
+            vis[pos_in_new] = emitters.visibility(groups.points[go], groups.normals[go])
+        gathered = np.zeros(new.size, dtype=bool)
+        gathered[pos_in_new] = True
+        added = cache.add(keys[new], inc, vis, gathered)
+        cache.batches.extend((added[p], cols, vals) for p, cols, vals in batches)
+        ids[new] = added
+        group_value = shade(scene, groups.material, cache.incident[ids])
+        C = leaf_scene.n_corners
+        corner_value = np.zeros((C, 3))
+        corner_value[ok] = group_value[groups.group[ok]]
+        step = dict(level=level, leaves=int(tree.leaves.shape[0]),
+                    points=int(tree.points.shape[0]), gathered=int(go.size),
+                    unlit=int(new.size - go.size))
+        if level == MAX_LEVELS:
+            steps.append(step | dict(seconds=time.perf_counter() - t0))
+            break
+        corner_vis = np.zeros(C, dtype=np.int64)
+        corner_vis[ok] = cache.vis[ids][groups.group[ok]]
+        emitting_leaf = np.any(emission[np.asarray(tree.material)] > 0, axis=1)
+        score, marked = per_leaf_scores(tree, conf, luminance(corner_value), corner_vis,
+                                        alone[leaf_scene.corner_verts], emitting_leaf, floor,
+                                        settings)
+        step.update(marked)
+        split = _split_within(tree, score, settings.vertex_budget) if score.any() else None
+        if split is None:
+            budget_hit = bool(score.any())
+            steps.append(step | dict(split=0, seconds=time.perf_counter() - t0))
+            break
+        tree, n_split = split
+        steps.append(step | dict(split=n_split, seconds=time.perf_counter() - t0))
+
+    mesh = output_mesh(scene, tree, conf, corner_value)
+    u_ids, entry = np.unique(ids, return_inverse=True)
+    entry = entry.reshape(-1)
+    corner_entry = np.zeros(leaf_scene.n_corners, dtype=np.int64)
+    corner_entry[ok] = entry[groups.group[ok]]
+    state = AdaptiveState(mesh=mesh, entry=corner_entry,
+                          material=cache.keys[u_ids, 1].astype(np.int64),
+                          rows=cache.rows_for(u_ids), lit=lit, elements=elements, seen=seen,
+                          user=_user_corners(scene, mesh))
+    report = dict(levels=steps, leaves=int(tree.leaves.shape[0]),
+                  points=int(tree.points.shape[0]), budget_hit=budget_hit,
+                  per_object=per_object_report(scene, mesh))
+    if elements is not None:
+        report["elements"] = dict(elements=int(elements.parent.size),
+                                  gathered=int(elements.computed.size), levels=elements.levels)
+    return mesh, state, report
+
+
+def _user_corners(scene, mesh):
+    """(C,) int64: an output corner at the same position in the same face as each user corner
+    (-1: none, for corners of dropped faces)."""
+    corners, faces = scene.face_corner_indices()
+    user_keys = np.concatenate([faces[:, None].astype(np.float64),
+                                scene.vertices[scene.corner_verts[corners]]], axis=1)
+    out_face = mesh.face_parent[mesh.face_of_corner()]
+    out_keys = np.concatenate([out_face[:, None].astype(np.float64),
+                               mesh.vertices[mesh.corner_verts]], axis=1)
+    both = np.concatenate([out_keys, user_keys])
+    _, inv = np.unique(both, axis=0, return_inverse=True)
+    inv = inv.reshape(-1)
+    where = np.full(inv.max() + 1, -1, dtype=np.int64)
+    where[inv[:out_keys.shape[0]]] = np.arange(out_keys.shape[0])
+    user = np.full(scene.n_corners, -1, dtype=np.int64)
+    user[corners] = where[inv[out_keys.shape[0]:]]
+    face_of = np.full(scene.n_corners, -1, dtype=np.int64)
+    face_of[corners] = faces
+    user[(face_of < 0) | ~scene.face_valid[np.maximum(face_of, 0)]] = -1
+    return user
+
+
+def per_object_report(scene, mesh):
+    """Per object name: input faces -> output vertices and faces."""
+    out = {}
+    obj_of_face = scene.face_objects[mesh.face_parent]
+    obj_of_corner = obj_of_face[mesh.face_of_corner()]
+    for o, name in enumerate(scene.object_names):
+        n_in = int(np.count_nonzero((scene.face_objects == o) & scene.face_valid))
+        if n_in == 0:
+            continue
+        verts = np.unique(mesh.corner_verts[obj_of_corner == o])
+        out[name] = dict(input_faces=n_in, output_faces=int(np.count_nonzero(obj_of_face == o)),
+                         output_vertices=int(verts.size))
+    return out
+
+
+def mesh_colours(scene, settings, patches, node_radiance, incident, state, contacts, monitor,
+                 fallback):
+    """The 'mesh' output's colours stage of a bake or a relight.
+
+    A relight (``state`` an :class:`AdaptiveState`) keeps the mesh and re-shades its kept rows;
+    if light now reaches patches it did not reach before (points there were never gathered),
+    the mesh is rebuilt.
+
+    Returns
+    -------
+    colours : (C, 3) float64
+        User corner colours (the output corner at the same place; ``fallback(...)`` for the
+        corners of dropped faces).
+    mesh : OutputMesh
+    state : AdaptiveState
+    report : dict
+    """
+    P = patches.areas.size
+    lit = np.any(np.asarray(incident)[:P] > 0, axis=1) \
+        | np.any(np.asarray(scene.emission)[patches.material] > 0, axis=1)
+    t0 = time.perf_counter()
+    if isinstance(state, AdaptiveState) and not np.any(lit & ~state.lit):
+        mesh = dataclasses.replace(state.mesh,
+                                   corner_colours=state.colours(scene, node_radiance))
+        state = AdaptiveState(**{**state.__dict__, "mesh": mesh})
+        report = dict(rebuilt=False, per_object=per_object_report(scene, mesh))
+        if state.elements is not None:
+            e = state.elements
+            report["elements"] = dict(elements=int(e.parent.size), gathered=int(e.computed.size),
+                                      levels=e.levels)
+    else:
+        rebuilt = isinstance(state, AdaptiveState)       # a relight that lights new patches
+        mesh, state, report = adaptive_output(scene, settings, patches, node_radiance, incident,
+                                              contacts=contacts, monitor=monitor)
+        report["rebuilt"] = rebuilt
+    colours = np.zeros((scene.n_corners, 3))
+    has = state.user >= 0
+    colours[has] = mesh.corner_colours[state.user[has]]
+    if not has.all():
+        colours[~has] = fallback()[~has]
+    report["seconds"] = time.perf_counter() - t0
+    return colours, mesh, state, report
