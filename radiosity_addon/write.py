@@ -150,39 +150,60 @@ def clear_bake(objects):
     """
     done = 0
     plain = set()
+    memory = _Memory()
     for obj in objects:
         if obj.type != "MESH" or obj.library is not None:
             continue
         if is_baked(obj):
-            _restore(obj)
+            memory.restore(obj)
             done += 1
         elif obj.data.library is None:
             plain.add(obj.data)
     return done + sum(clear_attribute(m) for m in plain)
 
 
-def _restore(obj):
-    """Original mesh, fake user and modifier flags back; our properties and baked mesh gone."""
-    original = obj[PROP_ORIGINAL]
-    baked = _show_original(obj)
-    original.use_fake_user = bool(obj.get(PROP_FAKE_USER, 0))
-    for key in (PROP_ORIGINAL, PROP_FAKE_USER, PROP_MODIFIERS):
-        if key in obj:
-            del obj[key]
-    baked.use_fake_user = False
-    if baked.users == 0 and baked.get(PROP_BAKED):
-        bpy.data.meshes.remove(baked)
+class _Memory:
+    """The pre-bake fake-user flag of every original mesh, over all baked objects of the file.
 
+    Objects that share an original remember the same flag (the one before the first of them was
+    baked), and the flag comes back only when the last of them is restored.
+    """
 
-def _install(obj, baked):
-    """Make *baked* the object's mesh, remembering the original state (first bake only)."""
-    original = obj.data
-    obj[PROP_ORIGINAL] = original
-    obj[PROP_FAKE_USER] = int(original.use_fake_user)
-    obj[PROP_MODIFIERS] = {m.name: [int(m.show_viewport), int(m.show_render)]
-                           for m in obj.modifiers if m.show_viewport}
-    original.use_fake_user = True
-    _show_baked(obj, baked)
+    def __init__(self):
+        self.flag, self.count = {}, {}
+        for obj in bpy.data.objects:
+            if obj.type == "MESH" and is_baked(obj):
+                key = obj[PROP_ORIGINAL].as_pointer()
+                self.flag.setdefault(key, bool(obj.get(PROP_FAKE_USER, 0)))
+                self.count[key] = self.count.get(key, 0) + 1
+
+    def restore(self, obj):
+        """Original mesh, fake user and modifier flags back; our properties and mesh gone."""
+        original = obj[PROP_ORIGINAL]
+        key = original.as_pointer()
+        baked = _show_original(obj)
+        self.count[key] -= 1
+        if self.count[key] == 0:
+            original.use_fake_user = self.flag[key]
+        for prop in (PROP_ORIGINAL, PROP_FAKE_USER, PROP_MODIFIERS):
+            if prop in obj:
+                del obj[prop]
+        baked.use_fake_user = False
+        if baked.users == 0 and baked.get(PROP_BAKED):
+            bpy.data.meshes.remove(baked)
+
+    def install(self, obj, baked):
+        """Make *baked* the mesh of an unbaked *obj*, remembering the original state."""
+        original = obj.data
+        key = original.as_pointer()
+        self.flag.setdefault(key, original.use_fake_user)
+        self.count[key] = self.count.get(key, 0) + 1
+        obj[PROP_ORIGINAL] = original
+        obj[PROP_FAKE_USER] = int(self.flag[key])
+        obj[PROP_MODIFIERS] = {m.name: [int(m.show_viewport), int(m.show_render)]
+                               for m in obj.modifiers if m.show_viewport}
+        original.use_fake_user = True
+        _show_baked(obj, baked)
 
 
 # ------------------------------------------------------------------------------ checks and writes
@@ -417,12 +438,13 @@ def write_mesh(objects, parts, output):
     for part, faces in zip(parts, per_part):
         built.append(part_mesh(part, output, faces))
     summary = []
+    memory = _Memory()
     for obj, part, arrays in zip(targets, parts, built):
         if is_baked(obj):
-            _restore(obj)
+            memory.restore(obj)
         original = obj.data
         mesh = new_mesh(original.name + BAKED_SUFFIX, arrays, part, list(original.materials))
-        _install(obj, mesh)
+        memory.install(obj, mesh)
         summary.append(dict(object=obj.name, input_faces=int(part.face_starts.size),
                             output_vertices=len(mesh.vertices),
                             output_faces=len(mesh.polygons)))
