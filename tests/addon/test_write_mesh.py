@@ -394,3 +394,33 @@ def test_faces_keep_their_orientation(package, scale):
     normals = np.array([p.normal for p in obj.data.polygons])
     centres = np.array([p.center for p in obj.data.polygons])
     assert np.all(np.einsum("ij,ij->i", normals, centres) > 0.1)
+
+
+def test_mesh_bake_is_one_undo_step(package, monkeypatch):
+    # The operator (as a click runs it) with the core's output stood in for: one undo brings
+    # back the original mesh, modifiers and no memory of the bake; redo brings the bake back.
+    lamp()
+    obj = modified_plane()
+    set_settings(bpy.context.scene, patch_size=1.0, resolution=16)
+    real_compute = job.compute
+
+    def compute(bake_input, progress=None, cancel=None):
+        result = real_compute(bake_input, progress, cancel)
+        result.output = split_output(bake_input.extraction.arrays)
+        return result
+
+    monkeypatch.setattr(job, "compute", compute)
+    bpy.ops.ed.undo_push(message="settings")
+    before = snapshot(obj.data)
+    assert bpy.ops.radiosity.bake("EXEC_DEFAULT", True) == {"FINISHED"}
+    obj = bpy.data.objects["Plane"]
+    assert write.is_baked(obj) and len(obj.data.polygons) == 32
+    bpy.ops.ed.undo()
+    obj = bpy.data.objects["Plane"]
+    assert not write.is_baked(obj) and obj.data.name == "Plane"
+    assert obj.modifiers["Grid"].show_viewport and obj.modifiers["Grid"].show_render
+    assert_same(snapshot(obj.data), before)
+    bpy.ops.ed.redo()
+    obj = bpy.data.objects["Plane"]
+    assert write.is_baked(obj) and len(obj.data.polygons) == 32
+    assert not obj.modifiers["Grid"].show_viewport
