@@ -88,6 +88,7 @@ _STAGES = dict(patches=(0.0, 0.05), form_factors=(0.05, 0.6), solve=(0.6, 0.7),
                colours=(0.7, 1.0))
 
 CORNERS = ("gather", "average")
+OUTPUTS = ("mesh", "vertices")
 
 #: Share of the colours stage's progress given to the element gathers (they take about a third
 #: of the vertex gather's time on the office sample).
@@ -112,8 +113,11 @@ class BakeSettings:
 
     Attributes
     ----------
-    patch_size : float
-        Largest patch edge in scene metres (> 0).
+    patch_size : float or None
+        Largest patch edge in scene metres (> 0). None (default): 0.5 m with
+        ``output='vertices'``; with ``output='mesh'`` the coarse start of the adaptive mesh,
+        1 m clamped to [diagonal / 400, diagonal / 8] of the scene's bounding box
+        (:func:`core.adaptive.coarse_patch_size`).
     method : str
         Form factors: ``'hemicube'``, ``'exact'`` (contour formula x ray-traced visibility) or
         ``'hybrid'`` (hemicube with near pairs done exactly).
@@ -178,9 +182,27 @@ class BakeSettings:
         it; costs about one more hemicube per vertex. ``'average'``: the area-weighted mean of
         the patches around the vertex (:mod:`core.colours`), free but a patch-mean value: off by
         tens of percent next to luminaires, in room corners and along shadow edges.
+        ``output='mesh'`` always gathers.
+
+    --- adaptive output mesh (issue 9; :mod:`core.adaptive`) ---
+    output : str
+        ``'mesh'`` (default): the baked result is the radiosity mesh itself
+        (``BakeResult.output``, a :class:`core.outmesh.OutputMesh`): the patches' elements,
+        refined where the light changes, conforming, each vertex gathered. ``'vertices'``:
+        colours only at the user's own corners (the behaviour before issue 9; the report's
+        ``face_variation`` says how much light varies inside the user's faces).
+    contrast : float
+        Relative luminance contrast between the vertices of one element, in (0, 1), above
+        which it is split ('mesh' only). Relative to the brighter vertex, never to less than
+        half the scene's mean luminance.
+    min_element : float
+        Smallest element edge (m, > 0) refinement makes ('mesh' only).
+    vertex_budget : int
+        Most output vertices (points of the element tree), >= 4 ('mesh' only). The worst
+        elements are split first; the report says when the budget stopped refinement.
     """
 
-    patch_size: float = 0.5
+    patch_size: float = None
     method: str = "hemicube"
     resolution: int = 64
     rotate_hemicube: bool = True
@@ -200,13 +222,19 @@ class BakeSettings:
     element_levels: int = 2
     element_threshold: float = 0.3
     contact_cuts: bool = True
+    # --- adaptive output mesh (issue 9): defaults measured in bench/bench_adaptive.py
+    output: str = "mesh"
+    contrast: float = 0.1
+    min_element: float = 0.02
+    vertex_budget: int = 200_000
 
     def __post_init__(self):
         def bad(name, allowed):
             raise SettingsError(f"{name} must be {allowed}; got {getattr(self, name)!r}")
 
-        if not _is_real(self.patch_size) or self.patch_size <= 0:
-            bad("patch_size", "a finite number > 0 (metres)")
+        if self.patch_size is not None and (not _is_real(self.patch_size)
+                                            or self.patch_size <= 0):
+            bad("patch_size", "a finite number > 0 (metres) or None")
         if self.method not in METHODS:
             bad("method", "one of " + ", ".join(repr(m) for m in METHODS))
         if not _is_int(self.resolution) or not 4 <= self.resolution <= 4096 \
@@ -246,6 +274,15 @@ class BakeSettings:
             bad("contact_cuts", "True or False")
         if not _is_real(self.near) or self.near < 0:
             bad("near", "a finite number >= 0 (times the larger patch size)")
+        # --- adaptive output mesh (issue 9)
+        if self.output not in OUTPUTS:
+            bad("output", "one of " + ", ".join(repr(o) for o in OUTPUTS))
+        if not _is_real(self.contrast) or not 0 < self.contrast < 1:
+            bad("contrast", "a number in (0, 1)")
+        if not _is_real(self.min_element) or self.min_element <= 0:
+            bad("min_element", "a finite number > 0 (metres)")
+        if not _is_int(self.vertex_budget) or self.vertex_budget < 4:
+            bad("vertex_budget", "an integer >= 4")
 
 
 @dataclass
@@ -266,7 +303,11 @@ class BakeResult:
         ``solver``, ``iterations``, ``residual``, ``converged``, ``timings``, ``energy``,
         ``form_factor_bytes`` (rows kept for relight; 0 after a matrix-free bake),
         ``matrix_bytes`` (the dense matrix built for the solve, or the row cache of a
-        matrix-free solve; freed after it), ``warnings``).
+        matrix-free solve; freed after it), ``warnings``; ``mesh`` with ``output='mesh'``:
+        see :func:`core.adaptive.adaptive_output`; ``face_variation`` with
+        ``output='vertices'``: see :func:`core.adaptive.face_variation`).
+    output : core.outmesh.OutputMesh or None
+        The radiosity mesh (``output='mesh'``), None with ``output='vertices'``.
     """
 
     corner_colours: np.ndarray
@@ -275,6 +316,7 @@ class BakeResult:
     patches: object
     report: dict
     _state: object = field(default=None, repr=False)
+    output: object = None
 
 
 # ----------------------------------------------------------------------------- form factor rows
@@ -510,6 +552,8 @@ class _State:
 
     def __init__(self, scene, settings, patches, store, active, gather=None, alone=None):
         self.gather = gather          # (CornerGroups, GatherRows, Elements or None), or None
+        #                               ('mesh' output: a core.adaptive.AdaptiveState)
+        self.contact_lines = None     # core.contacts.Contacts ('mesh' output), or None
         self.alone = alone            # vertices gathered per corner (contacts), or None
         self.scene = scene
         self.settings = settings
@@ -544,6 +588,10 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     monitor = Monitor(progress, cancel)
     t_start = time.perf_counter()
     timings = {}
+    if settings.patch_size is None:
+        from .adaptive import coarse_patch_size
+        settings = dataclasses.replace(settings, patch_size=0.5 if settings.output == "vertices"
+                                       else coarse_patch_size(scene))
 
     levels = settings.refine_levels
     level_monitor = _LevelMonitor(progress, cancel, 0, levels + 1)
@@ -561,15 +609,17 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     level_monitor.update(1.0, f"{len(patches.areas)} patches")
 
     result = _run(scene, settings, patches, None, None, level_monitor, timings, t_start, [],
-                  alone=alone)
+                  alone=alone, contact_lines=found if settings.contact_cuts else None)
     if levels:
-        result = _refine(scene, settings, patches, result, alone, progress, cancel, t_start)
+        result = _refine(scene, settings, patches, result, alone, progress, cancel, t_start,
+                         contact_lines=found if settings.contact_cuts else None)
     if contacts is not None:
         result.report["contacts"] = contacts
     return result
 
 
-def _refine(scene, settings, patches, result, alone, progress, cancel, t_start):
+def _refine(scene, settings, patches, result, alone, progress, cancel, t_start,
+            contact_lines=None):
     """Adaptive refinement after the first solve: split and re-solve, ``refine_levels`` times."""
     from .patches import subdivide_patches
     from .refine import refine_mask
@@ -592,7 +642,8 @@ def _refine(scene, settings, patches, result, alone, progress, cancel, t_start):
                           split=int(np.count_nonzero(mask))))
         level_monitor = _LevelMonitor(progress, cancel, level, levels + 1)
         result = _run(scene, settings, patches, None, None, level_monitor,
-                      {"patches": t_split}, time.perf_counter(), [], alone=alone)
+                      {"patches": t_split}, time.perf_counter(), [], alone=alone,
+                      contact_lines=contact_lines)
         for key, value in result.report["timings"].items():
             total[key] = total.get(key, 0.0) + value
     total["total"] = time.perf_counter() - t_start
@@ -669,14 +720,15 @@ def relight(result, *, reflectance=None, emission=None, progress=None, cancel=No
         monitor.update(1.0, "patches")
         timings["patches"] = 0.0
         return _run(new_scene, state.settings, state.patches, None, None, monitor, timings,
-                    t_start, warnings, alone=state.alone)
+                    t_start, warnings, alone=state.alone, contact_lines=state.contact_lines)
     timings = {"patches": 0.0}
     return _run(new_scene, state.settings, state.patches, state.store, state.active, monitor,
-                timings, t_start, warnings, gather=state.gather, alone=state.alone)
+                timings, t_start, warnings, gather=state.gather, alone=state.alone,
+                contact_lines=state.contact_lines)
 
 
 def _run(scene, settings, patches, store, active, monitor, timings, t_start, warnings,
-         gather=None, alone=None):
+         gather=None, alone=None, contact_lines=None):
     """Form factors (discovery, reusing ``store``), solve, colours, report."""
     from .colours import corner_colours
 
@@ -710,6 +762,9 @@ def _run(scene, settings, patches, store, active, monitor, timings, t_start, war
     # active row" alone would leave it black. What these late rows hit is not added: a node
     # that only unlit nodes see (the inside of a box, seen from the floor under it) stays out.
     late = np.flatnonzero(~active[:P])
+    if settings.output == "mesh" and len(late):       # issue 9: unlit surfaces cost nothing
+        from .adaptive import unlit_late_nodes
+        late = late[~unlit_late_nodes(scene, patches, active, late, settings.resolution)]
     if len(late) and not overflow:
         active, overflow = _discover(store, rows_fn, allowed, active, late, monitor,
                                      settings.memory_budget, batcher, expand=False)
@@ -829,7 +884,14 @@ def _run(scene, settings, patches, store, active, monitor, timings, t_start, war
     t0 = time.perf_counter()
     patch_radiance = node_radiance[:P].copy()
     element_report = None
-    if settings.corners == "gather":
+    mesh_out = mesh_report = None
+    if settings.output == "mesh":                     # issue 9: the adaptive radiosity mesh
+        from .adaptive import mesh_colours
+        colours, mesh_out, gather, mesh_report = mesh_colours(
+            scene, settings, patches, node_radiance, incident, gather, contact_lines, monitor,
+            lambda: corner_colours(scene, patches, patch_radiance,
+                                   crease_angle=settings.crease_angle))
+    elif settings.corners == "gather":
         from .gather import corner_groups, gather_rows, gathered_colours
         if gather is None:
             elements = None
@@ -901,8 +963,16 @@ def _run(scene, settings, patches, store, active, monitor, timings, t_start, war
     )
     if element_report is not None:
         report["elements"] = element_report
+    if mesh_report is not None:
+        report["mesh"] = mesh_report
+    elif settings.output == "vertices":
+        from .adaptive import face_variation
+        report["face_variation"] = face_variation(scene, patches, patch_radiance,
+                                                  settings.contrast)
     state = _State(scene, settings, patches, store, active, gather, alone)
-    return BakeResult(colours, patch_radiance, node_radiance, patches, report, state)
+    state.contact_lines = contact_lines
+    return BakeResult(colours, patch_radiance, node_radiance, patches, report, state,
+                      output=mesh_out)
 
 
 #: Sinkhorn scaling of make_reciprocal stops when every row sum is within this relative

@@ -1,0 +1,585 @@
+"""The adaptive radiosity mesh: receiver elements refined where the light changes, as the output.
+
+Substructuring (Cohen, Greenberg, Immel & Brock 1986): the solve stays on the coarse patches;
+the *elements* of a :class:`core.hierarchy.ElementTree` built from them are receivers only. Each
+level, the radiance is gathered at the element vertices the level added (a hemicube at the point
+over the solved patches, :mod:`core.gather`: the values already gathered stay valid), and the
+leaves are split where
+
+* the luminance differs between the leaf's vertices by more than ``contrast`` relative to the
+  brighter one, never relative to less than ``DARK_FLOOR`` x the scene's mean luminance, so that
+  darkness does not refine for ever (contrast-driven meshing, Lightscape, Blender 2.4x);
+* the emitters' visibility differs between the leaf's vertices (a shadow boundary passes): one
+  shadow ray from every vertex to each of ``SHADOW_SAMPLES`` fixed points on the emitters;
+* a contact line runs along the leaf (the light falls off steeply towards an object's foot) and
+  the leaf is larger than ``CONTACT_ELEMENT``;
+
+never below ``min_element`` and within ``vertex_budget`` points, worst first (score: the leaf's
+area times how far it is over the threshold).
+
+The output is the conforming triangulation of the leaves (``tree.conforming()``): every output
+corner gathers as a corner of that triangulation, seen as a scene of its own (the leaves'
+faces inherit material and object from their parent faces), so creases, material edges and
+contact-line vertices split per corner exactly as at the user's own vertices.
+
+A point none of whose adjacent patches receives any light is not gathered (its radiance is its
+emission): surfaces no light reaches cost no hemicube.
+"""
+
+import time
+
+import numpy as np
+
+from .gather import NORMAL_DECIMALS, GatherRows, compact_rows, corner_groups, shade
+from .refine import DARK_FLOOR, LUMINANCE
+
+#: Default coarse patch size (m) of the mesh output, clamped to the scene's bounding diagonal
+#: times [COARSE_MIN_FRACTION, COARSE_MAX_FRACTION]: 1 m keeps a room's walls at a few dozen
+#: patches (the solve carries the energy, the elements carry the detail), a 4 m model gets
+#: 0.5 m patches (diag / 8), a 400 m site 1 m.
+COARSE_PATCH = 1.0
+COARSE_MIN_FRACTION = 1.0 / 400.0
+COARSE_MAX_FRACTION = 1.0 / 8.0
+
+#: Fixed emitter points that the shadow test casts rays to from every element vertex.
+SHADOW_SAMPLES = 16
+
+#: Leaves along a contact line are split down to this size (m) (or min_element if larger).
+CONTACT_ELEMENT = 0.25
+
+#: Refinement stops after this many levels (a 1 m patch halved 12 times is 0.24 mm).
+MAX_LEVELS = 12
+
+#: Estimated new points of one leaf split (a quad adds its centre and four shared midpoints,
+#: a triangle three shared midpoints; 2:1 balancing adds some more): used to pick how many
+#: leaves fit in the budget. The split is retried with fewer leaves if the estimate was short.
+POINTS_PER_SPLIT = 4.0
+BUDGET_RETRIES = 6
+
+#: Hemicubes per point_rows call.
+GATHER_BATCH = 64
+
+#: Alone points lie within the contacts' tolerance of a contact line; lines are tested against
+#: points in chunks of this many (point, line) pairs.
+PAIR_CHUNK = 2_000_000
+
+#: Inset directions of per-corner (alone) gathers are matched after rounding to these decimals.
+DIRECTION_DECIMALS = 2
+
+OUTPUTS = ("mesh", "vertices")
+
+
+def coarse_patch_size(scene, patch_size=None):
+    """Patch size (m) the solve starts from when the output is the adaptive mesh.
+
+    ``patch_size`` given: used as is. None: ``COARSE_PATCH`` clamped to the bounding diagonal
+    times [``COARSE_MIN_FRACTION``, ``COARSE_MAX_FRACTION``].
+    """
+    if patch_size is not None:
+        return float(patch_size)
+    diag = scene.bounding_diagonal()
+    return float(np.clip(COARSE_PATCH, COARSE_MIN_FRACTION * diag, COARSE_MAX_FRACTION * diag))
+
+
+def luminance(rgb):
+    """(n,) luminance of (n, 3) scene-linear RGB."""
+    return np.asarray(rgb, dtype=np.float64) @ LUMINANCE
+
+
+def dark_floor(patches, patch_radiance, scene):
+    """The contrast test's absolute floor: DARK_FLOOR x the area-weighted mean luminance of the
+    non-emitting patches (tiny positive if the scene is black)."""
+    emitting = np.any(np.asarray(scene.emission)[patches.material] > 0, axis=1)
+    a = patches.areas[~emitting]
+    y = luminance(patch_radiance)[~emitting]
+    mean = float((a * y).sum() / a.sum()) if a.sum() > 0 else 0.0
+    return DARK_FLOOR * mean if mean > 0 else 1e-300
+
+
+def face_variation(scene, patches, patch_radiance, contrast):
+    """How much the light varies inside the user's faces (the 'vertices' output's loss).
+
+    A face varies when the luminance of its patches spans more than ``contrast`` relative to
+    its brightest (floored as in the refinement): one colour per user corner cannot show that.
+
+    Returns
+    -------
+    dict
+        ``faces_varying`` (count), ``area_share_varying`` (area fraction of the non-emitting
+        faces), ``worst_faces`` (labels of up to 5 faces, largest area first).
+    """
+    floor = dark_floor(patches, patch_radiance, scene)
+    y = luminance(patch_radiance)
+    F = scene.n_faces
+    hi = np.full(F, -np.inf)
+    lo = np.full(F, np.inf)
+    np.maximum.at(hi, patches.face, y)
+    np.minimum.at(lo, patches.face, y)
+    emits = np.any(np.asarray(scene.emission)[scene.face_materials] > 0, axis=1)
+    has = np.isfinite(hi) & scene.face_valid & ~emits
+    var = np.zeros(F, dtype=bool)
+    var[has] = (hi[has] - lo[has]) / np.maximum(hi[has], floor) > contrast
+    total = float(scene.face_areas[has].sum())
+    share = float(scene.face_areas[var].sum()) / total if total > 0 else 0.0
+    worst = np.flatnonzero(var)[np.argsort(-scene.face_areas[var])][:5]
+    return dict(faces_varying=int(var.sum()), area_share_varying=share,
+                worst_faces=[scene.face_label(f) for f in worst])
+
+
+def unlit_late_nodes(scene, patches, active, late, resolution):
+    """Which of the late front nodes (never reached by discovery) need no hemicube row.
+
+    ``bake._run`` computes a row for every unreached front node, because a small patch can slip
+    between the pixels of every hemicube that looks at it. A whole face none of whose patches
+    was reached, and which is large enough to cover several pixels of a hemicube at the far
+    end of the scene, did not slip: no light reaches it. Its patches stay black without rows.
+    (A 100 x 100 m ground plane outside a closed room: 10,000 rows saved.)
+
+    Returns
+    -------
+    (len(late),) bool
+    """
+    P = patches.areas.size
+    face_reached = np.zeros(scene.n_faces, dtype=bool)
+    face_reached[patches.face[np.flatnonzero(active[:P])]] = True
+    diag = scene.bounding_diagonal()
+    pixel = (2.0 / resolution) ** 2          # solid angle of a pixel at the top face's centre
+    big = scene.face_areas >= 4.0 * pixel * diag * diag
+    f = patches.face[late]
+    return ~face_reached[f] & big[f]
+
+
+def contact_points(points, lines, chunk=PAIR_CHUNK):
+    """(V,) bool: points within the contacts' tolerance of one of their lines.
+
+    Parameters
+    ----------
+    points : (V, 3) float64
+    lines : core.contacts.Contacts or None
+    """
+    out = np.zeros(points.shape[0], dtype=bool)
+    if lines is None or lines.a.shape[0] == 0 or points.shape[0] == 0:
+        return out
+    key = np.round(np.concatenate([lines.a, lines.u, lines.length[:, None]], axis=1), 9)
+    _, first = np.unique(key, axis=0, return_index=True)
+    a, u, w, length = lines.a[first], lines.u[first], lines.w[first], lines.length[first]
+    n = np.cross(u, w)
+    tol = lines.tol
+    step = max(1, chunk // a.shape[0])
+    for s in range(0, points.shape[0], step):
+        rel = points[s:s + step, None, :] - a[None]
+        t = np.einsum("pkj,kj->pk", rel, u)
+        on = (np.abs(np.einsum("pkj,kj->pk", rel, w)) <= tol) \
+            & (np.abs(np.einsum("pkj,kj->pk", rel, n)) <= tol) \
+            & (t >= -tol) & (t <= length[None] + tol)
+        out[s:s + step] = on.any(axis=1)
+    return out
+
+
+class _Emitters:
+    """Fixed sample points on the emitters and the shadow rays to them."""
+
+    def __init__(self, scene, patches, rng):
+        from .exact import ray_triangles
+        from .raycast import build_bvh
+
+        le = luminance(np.asarray(scene.emission)[patches.material])
+        emitting = np.flatnonzero(le > 0)
+        self.n = 0
+        if emitting.size == 0:
+            return
+        weight = patches.areas[emitting] * le[emitting]
+        pick = emitting[rng.choice(emitting.size, size=SHADOW_SAMPLES, p=weight / weight.sum())]
+        c = patches.corners[pick]
+        u, v = rng.random(SHADOW_SAMPLES), rng.random(SHADOW_SAMPLES)
+        # A point inside the patch (triangles repeat their last corner: the map still lands
+        # inside them).
+        self.points = ((1 - u) * (1 - v))[:, None] * c[:, 0] + (u * (1 - v))[:, None] * c[:, 1] \
+            + (u * v)[:, None] * c[:, 2] + ((1 - u) * v)[:, None] * c[:, 3]
+        self.normals = patches.normals[pick]
+        self.bvh = build_bvh(ray_triangles(patches)[0])
+        self.offset = 1e-6 * max(float(np.ptp(patches.corners.reshape(-1, 3), axis=0).max()), 1.0)
+        self.n = SHADOW_SAMPLES
+
+    def visibility(self, points, normals):
+        """(S,) int64 bit masks: bit k set when emitter sample k is visible from the point."""
+        from .raycast import any_hit
+
+        S = points.shape[0]
+        out = np.zeros(S, dtype=np.int64)
+        if self.n == 0 or S == 0:
+            return out
+        o = points + self.offset * normals
+        d = self.points[None, :, :] - o[:, None, :]                 # (S, K, 3)
+        facing = (np.einsum("skj,sj->sk", d, normals) > 0) \
+            & (np.einsum("skj,kj->sk", d, self.normals) < 0)
+        s, k = np.nonzero(facing)
+        vis = np.zeros((S, self.n), dtype=bool)
+        if s.size:
+            vis[s, k] = ~any_hit(self.bvh, o[s], d[s, k], t_max=1.0 - 1e-6)
+        return (vis.astype(np.int64) << np.arange(self.n, dtype=np.int64)).sum(axis=1)
+
+
+class AdaptiveState:
+    """What relight needs: the output mesh and the gather rows of its corner groups.
+
+    Attributes
+    ----------
+    mesh : core.outmesh.OutputMesh
+    entry : (C_out,) int64
+        Gathered point (index into ``material`` and ``rows``) of every output corner.
+    material : (U,) int64
+    rows : GatherRows
+        Point-to-node rows of the U points (against the nodes the gathers saw: the solved
+        patches, or the receiver elements); points that no light reached have none.
+    lit : (P,) bool
+        Patches that received light in the bake (relight rebuilds the mesh if more do).
+    elements : core.elements.Elements or None
+    user : (C,) int64
+        Output corner whose colour each user corner takes (-1: none, a dropped face).
+    """
+
+    def __init__(self, **kw):
+        self.__dict__.update(kw)
+
+    def colours(self, scene, node_radiance):
+        """(C_out, 3) output corner colours for the solved ``node_radiance`` (2P, 3)."""
+        L = node_radiance
+        if self.elements is not None:
+            L = self.elements.node_radiance(scene, node_radiance)
+        inc = self.rows.incident(L)
+        return shade(scene, self.material, inc)[self.entry]
+
+
+def _leaf_scene(scene, tree, conf):
+    """The conforming triangulation of the leaves as a Scene of its own."""
+    from .scene import make_scene
+
+    leaf = conf["face_leaf"]
+    return make_scene(tree.points, conf["corner_verts"], conf["face_starts"], conf["face_sizes"],
+                      np.asarray(tree.material)[leaf], scene.reflectance, scene.emission,
+                      face_objects=scene.face_objects[conf["face_parent"]],
+                      object_names=scene.object_names, material_names=scene.material_names,
+                      back_reflectance=scene.back_reflectance, back_emission=scene.back_emission)
+
+
+class _Cache:
+    """Gathered groups, keyed by (point, material, normal, inset direction of alone groups)."""
+
+    def __init__(self, n_nodes):
+        self.keys = np.zeros((0, 8))
+        self.incident = np.zeros((0, 3))
+        self.vis = np.zeros(0, dtype=np.int64)
+        self.gathered = np.zeros(0, dtype=bool)
+        self.batches = []                      # (key ids (S,), cols (K,), vals (S, K) f32)
+        self.n_nodes = n_nodes
+
+    def lookup(self, keys):
+        """Index of every key row in the cache (-1: new)."""
+        if self.keys.shape[0] == 0:
+            return np.full(keys.shape[0], -1, dtype=np.int64)
+        both = np.concatenate([self.keys, keys])
+        _, inv = np.unique(both, axis=0, return_inverse=True)
+        inv = inv.reshape(-1)
+        where = np.full(inv.max() + 1, -1, dtype=np.int64)
+        where[inv[:self.keys.shape[0]]] = np.arange(self.keys.shape[0])
+        return where[inv[self.keys.shape[0]:]]
+
+    def add(self, keys, incident, vis, gathered):
+        start = self.keys.shape[0]
+        self.keys = np.concatenate([self.keys, keys])
+        self.incident = np.concatenate([self.incident, incident])
+        self.vis = np.concatenate([self.vis, vis])
+        self.gathered = np.concatenate([self.gathered, gathered])
+        return np.arange(start, start + keys.shape[0])
+
+    def rows_for(self, ids):
+        """GatherRows whose group g is cache entry ``ids[g]`` (``ids`` distinct; entries never
+        gathered get no row: their incident light is zero)."""
+        store = GatherRows(ids.size, self.n_nodes)
+        pos = np.full(self.keys.shape[0], -1, dtype=np.int64)
+        pos[ids] = np.arange(ids.size)
+        for kid, cols, vals in self.batches:
+            g = pos[kid]
+            ok = g >= 0
+            if ok.any():
+                store.add_compact(g[ok], cols, vals[ok])
+        return store
+
+
+def _group_keys(leaf_scene, groups, alone):
+    """(G, 8) float64 cache keys of the corner groups, and the vertex of each group."""
+    ok = np.flatnonzero(groups.group >= 0)
+    G = groups.points.shape[0]
+    vertex = np.zeros(G, dtype=np.int64)
+    vertex[groups.group[ok]] = leaf_scene.corner_verts[ok]
+    direction = groups.points - leaf_scene.vertices[vertex]
+    length = np.linalg.norm(direction, axis=1, keepdims=True)
+    direction = np.divide(direction, length, out=np.zeros_like(direction), where=length > 0)
+    direction[~alone[vertex]] = 0.0
+    keys = np.concatenate([vertex[:, None].astype(np.float64),
+                           groups.material[:, None].astype(np.float64),
+                           np.round(groups.normals, NORMAL_DECIMALS),
+                           np.round(direction, DIRECTION_DECIMALS)], axis=1)
+    return keys, vertex
+
+
+def _per_leaf(conf, values, n_leaves, fn, fill):
+    """Reduce per-corner ``values`` over the leaf of each corner's output face."""
+    face_of = np.repeat(np.arange(conf["face_sizes"].size), conf["face_sizes"])
+    out = np.full(n_leaves, fill, dtype=values.dtype)
+    fn.at(out, conf["face_leaf"][face_of], values)
+    return out
+
+
+def _scores(tree, conf, corner_y, corner_vis, corner_alone, emitting_leaf, floor, settings):
+    """(E,) float: how badly each leaf needs splitting (0: not at all)."""
+    E = tree.leaves.shape[0]
+    hi = _per_leaf(conf, corner_y, E, np.maximum, -np.inf)
+    lo = _per_leaf(conf, corner_y, E, np.minimum, np.inf)
+    has = np.isfinite(hi)
+    diff = np.zeros(E)
+    diff[has] = (hi[has] - lo[has]) / np.maximum(hi[has], floor)
+    area = np.asarray(tree.areas, dtype=np.float64)
+    score = np.where(diff > settings.contrast, area * diff / settings.contrast, 0.0)
+    vmax = _per_leaf(conf, corner_vis, E, np.maximum, np.int64(-1))
+    vmin = _per_leaf(conf, corner_vis, E, np.minimum, np.int64(np.iinfo(np.int64).max))
+    shadow = has & (vmax != vmin)
+    score = np.maximum(score, np.where(shadow, area, 0.0))
+    touches = _per_leaf(conf, corner_alone.astype(np.int64), E, np.maximum, np.int64(0)) > 0
+    size = np.asarray(tree.sizes, dtype=np.float64)
+    contact = touches & (size > max(CONTACT_ELEMENT, 2.0 * settings.min_element))
+    score = np.maximum(score, np.where(contact, 0.5 * area, 0.0))
+    score[emitting_leaf] = 0.0
+    score[size < 2.0 * settings.min_element] = 0.0
+    return score, dict(contrast=int(np.count_nonzero(diff > settings.contrast)),
+                       shadow=int(np.count_nonzero(shadow)), contact=int(np.count_nonzero(contact)))
+
+
+def _split_within(tree, score, budget):
+    """Split the worst leaves that fit in ``budget`` points; None when none fits."""
+    cand = np.flatnonzero(score > 0)
+    cand = cand[np.argsort(-score[cand], kind="stable")]
+    n_fit = int((budget - tree.points.shape[0]) // POINTS_PER_SPLIT)
+    take = cand[:max(n_fit, 0)]
+    for _ in range(BUDGET_RETRIES):
+        if take.size == 0:
+            return None
+        mask = np.zeros(tree.leaves.shape[0], dtype=bool)
+        mask[take] = True
+        new, _ = tree.split(mask)
+        if new.points.shape[0] <= budget:
+            return new, int(take.size)
+        take = take[:take.size // 2]
+    return None
+
+
+def adaptive_output(scene, settings, patches, node_radiance, incident, *, contacts=None,
+                    monitor=None):
+    """Refine the receiver elements where the light changes; gather at their vertices.
+
+    Parameters
+    ----------
+    scene : core.scene.Scene
+    settings : core.bake.BakeSettings
+        Uses ``contrast``, ``min_element``, ``vertex_budget``, ``crease_angle``,
+        ``element_levels``/``element_threshold`` (the receiver elements the gathers see),
+        ``resolution``, ``rotate_hemicube``, ``seed``.
+    patches : core.patches.Patches
+        The solved patches (P).
+    node_radiance : (2P, 3) float64
+        Solved radiance.
+    incident : (2P, 3) float64
+        Power arriving at every node: points next to no lit patch are not gathered.
+    contacts : core.contacts.Contacts, optional
+        Contact lines: points on them gather per corner and leaves along them refine.
+    monitor : core.progress.Monitor or SubMonitor, optional
+
+    Returns
+    -------
+    mesh : core.outmesh.OutputMesh
+    state : AdaptiveState
+    report : dict
+        ``levels`` (per level: leaves, points, split, gathered, unlit (points not gathered),
+        marked by contrast / shadow / contact, seconds), ``leaves``, ``points``, ``budget_hit``.
+    """
+    from .hemicube import point_rows
+    from .hierarchy import ElementTree, output_mesh
+    from .progress import SubMonitor
+
+    L = np.asarray(node_radiance, dtype=np.float64)
+    P = patches.areas.size
+    elements, seen, seen_L = None, patches, L
+    gather_monitor = monitor
+    if settings.element_levels:
+        from .elements import make_elements
+        elements = make_elements(
+            scene, patches, L, levels=settings.element_levels,
+            threshold=settings.element_threshold, crease_angle=settings.crease_angle,
+            resolution=settings.resolution, rotate=settings.rotate_hemicube,
+            rng=np.random.default_rng([settings.seed, 3]),
+            monitor=None if monitor is None else SubMonitor(monitor, 0.0, 0.2))
+        seen, seen_L = elements.patches, elements.node_radiance(scene, L)
+        gather_monitor = None if monitor is None else SubMonitor(monitor, 0.2, 1.0)
+    emission = np.asarray(scene.emission)
+    lit = np.any(np.asarray(incident)[:P] > 0, axis=1) \
+        | np.any(emission[patches.material] > 0, axis=1)
+    floor = dark_floor(patches, L[:P], scene)
+    rng = np.random.default_rng([settings.seed, 2])
+    emitters = _Emitters(scene, patches, np.random.default_rng([settings.seed, 4]))
+    cache = _Cache(2 * seen.areas.size)
+    tree = ElementTree.from_patches(scene, patches)
+    steps = []
+    budget_hit = False
+    for level in range(MAX_LEVELS + 1):
+        t0 = time.perf_counter()
+        conf = tree.conforming()
+        leaf_scene = _leaf_scene(scene, tree, conf)
+        alone = contact_points(tree.points, contacts)
+        groups = corner_groups(leaf_scene, crease_angle=settings.crease_angle, alone=alone)
+        keys, vertex = _group_keys(leaf_scene, groups, alone)
+        ids = cache.lookup(keys)
+        new = np.flatnonzero(ids < 0)
+        # Points next to no lit patch see no light: no hemicube.
+        ok = np.flatnonzero(groups.group >= 0)
+        face_of = np.repeat(np.arange(conf["face_sizes"].size), conf["face_sizes"])
+        corner_patch = np.asarray(tree.leaf_patch)[conf["face_leaf"][face_of]]
+        group_lit = np.zeros(groups.points.shape[0], dtype=bool)
+        np.logical_or.at(group_lit, groups.group[ok], lit[corner_patch[ok]])
+        go = new[group_lit[new]]
+        inc = np.zeros((new.size, 3))
+        vis = np.zeros(new.size, dtype=np.int64)
+        batches = []
+        pos_in_new = np.searchsorted(new, go)
+        for s in range(0, go.size, GATHER_BATCH):
+            g = go[s:s + GATHER_BATCH]
+            rows = point_rows(seen, groups.points[g], groups.normals[g],
+                              resolution=settings.resolution, rotate=settings.rotate_hemicube,
+                              rng=rng)
+            cols, vals = compact_rows(rows)
+            inc[pos_in_new[s:s + GATHER_BATCH]] = vals.astype(np.float64) @ seen_L[cols]
+            batches.append((pos_in_new[s:s + GATHER_BATCH], cols, vals))
+            if gather_monitor is not None:
+                gather_monitor.update(min(1.0 - 0.5 ** level * (1.0 - (s + g.size) / go.size)
+                                          * 0.5, 0.99), f"mesh: level {level}, "
+                                      f"{tree.points.shape[0]} points")
+        if go.size:
+            vis[pos_in_new] = emitters.visibility(groups.points[go], groups.normals[go])
+        gathered = np.zeros(new.size, dtype=bool)
+        gathered[pos_in_new] = True
+        added = cache.add(keys[new], inc, vis, gathered)
+        cache.batches.extend((added[p], cols, vals) for p, cols, vals in batches)
+        ids[new] = added
+        group_value = shade(scene, groups.material, cache.incident[ids])
+        C = leaf_scene.n_corners
+        corner_value = np.zeros((C, 3))
+        corner_value[ok] = group_value[groups.group[ok]]
+        step = dict(level=level, leaves=int(tree.leaves.shape[0]),
+                    points=int(tree.points.shape[0]), gathered=int(go.size),
+                    unlit=int(new.size - go.size))
+        if level == MAX_LEVELS:
+            steps.append(step | dict(seconds=time.perf_counter() - t0))
+            break
+        corner_vis = np.zeros(C, dtype=np.int64)
+        corner_vis[ok] = cache.vis[ids][groups.group[ok]]
+        emitting_leaf = np.any(emission[np.asarray(tree.material)] > 0, axis=1)
+        score, marked = _scores(tree, conf, luminance(corner_value), corner_vis,
+                                alone[leaf_scene.corner_verts], emitting_leaf, floor, settings)
+        step.update(marked)
+        split = _split_within(tree, score, settings.vertex_budget) if score.any() else None
+        if split is None:
+            budget_hit = bool(score.any())
+            steps.append(step | dict(split=0, seconds=time.perf_counter() - t0))
+            break
+        tree, n_split = split
+        steps.append(step | dict(split=n_split, seconds=time.perf_counter() - t0))
+
+    mesh = output_mesh(scene, tree, conf, corner_value)
+    u_ids, entry = np.unique(ids, return_inverse=True)
+    entry = entry.reshape(-1)
+    corner_entry = np.zeros(leaf_scene.n_corners, dtype=np.int64)
+    corner_entry[ok] = entry[groups.group[ok]]
+    state = AdaptiveState(mesh=mesh, entry=corner_entry,
+                          material=cache.keys[u_ids, 1].astype(np.int64),
+                          rows=cache.rows_for(u_ids), lit=lit, elements=elements,
+                          user=_user_corners(scene, mesh))
+    report = dict(levels=steps, leaves=int(tree.leaves.shape[0]),
+                  points=int(tree.points.shape[0]), budget_hit=budget_hit,
+                  per_object=per_object_report(scene, mesh))
+    return mesh, state, report
+
+
+def _user_corners(scene, mesh):
+    """(C,) int64: an output corner at the same position in the same face as each user corner
+    (-1: none, for corners of dropped faces)."""
+    corners, faces = scene.face_corner_indices()
+    user_keys = np.concatenate([faces[:, None].astype(np.float64),
+                                scene.vertices[scene.corner_verts[corners]]], axis=1)
+    out_face = mesh.face_parent[mesh.face_of_corner()]
+    out_keys = np.concatenate([out_face[:, None].astype(np.float64),
+                               mesh.vertices[mesh.corner_verts]], axis=1)
+    both = np.concatenate([out_keys, user_keys])
+    _, inv = np.unique(both, axis=0, return_inverse=True)
+    inv = inv.reshape(-1)
+    where = np.full(inv.max() + 1, -1, dtype=np.int64)
+    where[inv[:out_keys.shape[0]]] = np.arange(out_keys.shape[0])
+    user = np.full(scene.n_corners, -1, dtype=np.int64)
+    user[corners] = where[inv[out_keys.shape[0]:]]
+    face_of = np.full(scene.n_corners, -1, dtype=np.int64)
+    face_of[corners] = faces
+    user[(face_of < 0) | ~scene.face_valid[np.maximum(face_of, 0)]] = -1
+    return user
+
+
+def per_object_report(scene, mesh):
+    """Per object name: input faces -> output vertices and faces."""
+    out = {}
+    obj_of_face = scene.face_objects[mesh.face_parent]
+    obj_of_corner = obj_of_face[mesh.face_of_corner()]
+    for o, name in enumerate(scene.object_names):
+        n_in = int(np.count_nonzero((scene.face_objects == o) & scene.face_valid))
+        if n_in == 0:
+            continue
+        verts = np.unique(mesh.corner_verts[obj_of_corner == o])
+        out[name] = dict(input_faces=n_in, output_faces=int(np.count_nonzero(obj_of_face == o)),
+                         output_vertices=int(verts.size))
+    return out
+
+
+def mesh_colours(scene, settings, patches, node_radiance, incident, state, contacts, monitor,
+                 fallback):
+    """The 'mesh' output's colours stage of a bake or a relight.
+
+    A relight (``state`` an :class:`AdaptiveState`) keeps the mesh and re-shades its kept rows;
+    if light now reaches patches it did not reach before (points there were never gathered),
+    the mesh is rebuilt.
+
+    Returns
+    -------
+    colours : (C, 3) float64
+        User corner colours (the output corner at the same place; ``fallback(...)`` for the
+        corners of dropped faces).
+    mesh : OutputMesh
+    state : AdaptiveState
+    report : dict
+    """
+    P = patches.areas.size
+    lit = np.any(np.asarray(incident)[:P] > 0, axis=1) \
+        | np.any(np.asarray(scene.emission)[patches.material] > 0, axis=1)
+    t0 = time.perf_counter()
+    if isinstance(state, AdaptiveState) and not np.any(lit & ~state.lit):
+        import dataclasses
+        mesh = dataclasses.replace(state.mesh,
+                                   corner_colours=state.colours(scene, node_radiance))
+        state = AdaptiveState(**{**state.__dict__, "mesh": mesh})
+        report = dict(rebuilt=False, per_object=per_object_report(scene, mesh))
+    else:
+        mesh, state, report = adaptive_output(scene, settings, patches, node_radiance, incident,
+                                              contacts=contacts, monitor=monitor)
+    colours = np.zeros((scene.n_corners, 3))
+    has = state.user >= 0
+    colours[has] = mesh.corner_colours[state.user[has]]
+    if not has.all():
+        colours[~has] = fallback()[~has]
+    report["seconds"] = time.perf_counter() - t0
+    return colours, mesh, state, report
