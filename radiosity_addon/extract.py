@@ -52,6 +52,8 @@ class Part:
         Every UV map of the evaluated mesh, by name, in the mesh's order.
     uv_active, uv_render : int
         Index of the active and of the render UV map (-1 without UV maps).
+    attributes : list of (name, domain, data_type, (N, k) array)
+        The evaluated mesh's other attributes on points, corners and faces (:func:`read_attributes`).
     """
 
     object_name: str
@@ -70,6 +72,7 @@ class Part:
     uv_maps: list = field(default_factory=list)
     uv_active: int = -1
     uv_render: int = -1
+    attributes: list = field(default_factory=list)
 
 
 @dataclass
@@ -127,6 +130,42 @@ def read_uv_maps(mesh):
         if layer.active_render:
             render = i
     return maps, active, render
+
+
+#: Attribute data types carried onto a baked mesh: foreach property, width, NumPy dtype.
+ATTRIBUTE_TYPES = {"FLOAT": ("value", 1, np.float32), "FLOAT2": ("vector", 2, np.float32),
+                   "FLOAT_VECTOR": ("vector", 3, np.float32),
+                   "FLOAT_COLOR": ("color", 4, np.float32), "BYTE_COLOR": ("color", 4, np.float32),
+                   "INT": ("value", 1, np.int32), "INT8": ("value", 1, np.int32),
+                   "BOOLEAN": ("value", 1, bool)}
+
+#: Attributes a baked mesh gets otherwise (geometry, UV maps, material, shading) or never keeps.
+OWN_ATTRIBUTES = {"position", "material_index", "sharp_face", "Radiosity"}
+
+
+def read_attributes(mesh):
+    """The user's attributes on points, corners and faces, as arrays.
+
+    Internal (``.name``), geometry, UV-map, material-index and shading attributes are left out
+    (the baked mesh has its own), as are edge attributes and types not in
+    :data:`ATTRIBUTE_TYPES`.
+
+    Returns
+    -------
+    list of (name, domain, data_type, (N, k) array)
+    """
+    skip = OWN_ATTRIBUTES | {layer.name for layer in mesh.uv_layers}
+    out = []
+    for attr in mesh.attributes:
+        kind = ATTRIBUTE_TYPES.get(attr.data_type)
+        if (kind is None or attr.domain not in ("POINT", "CORNER", "FACE")
+                or attr.name.startswith(".") or attr.name in skip):
+            continue
+        prop, width, dtype = kind
+        buf = np.empty(len(attr.data) * width, dtype=dtype)
+        attr.data.foreach_get(prop, buf)
+        out.append((attr.name, attr.domain, attr.data_type, buf.reshape(-1, width)))
+    return out
 
 
 def transform(points, matrix):
@@ -243,6 +282,7 @@ def _extract(depsgraph, selected_only):
             if not inst.is_instance and fs.size:
                 smooth = read_face_smooth(mesh)
                 uv_maps, uv_active, uv_render = read_uv_maps(mesh)
+                attributes = read_attributes(mesh)
         finally:
             obj.to_mesh_clear()
         if fs.size == 0:
@@ -267,7 +307,8 @@ def _extract(depsgraph, selected_only):
             out.parts.append(Part(obj.original.name, nc, nc + cv.size, perm, v_world, cv, fs, fz,
                                   matrix, face_start=sum(x.size for x in starts),
                                   object_vertices=v, face_materials=fm, face_smooth=smooth,
-                                  uv_maps=uv_maps, uv_active=uv_active, uv_render=uv_render))
+                                  uv_maps=uv_maps, uv_active=uv_active, uv_render=uv_render,
+                                  attributes=attributes))
         add_faces(v_world, cv[perm], fs, fz, fm_global, obj_index)
 
     if no_material:

@@ -26,7 +26,7 @@ import numpy as np
 
 from ..core import transfer
 from ..core.transfer import CORNER_INSET  # noqa: F401  (the tolerance of the corner mapping)
-from .extract import read_mesh_layout, transform
+from .extract import ATTRIBUTE_TYPES, read_mesh_layout, transform
 
 #: Name of the colour attribute the bake writes (and the only one it touches or clears).
 ATTRIBUTE = "Radiosity"
@@ -344,7 +344,9 @@ def part_mesh(part, output, faces):
     dict
         ``vertices`` (V, 3), ``corner_verts`` (C,), ``face_starts``, ``face_sizes``,
         ``face_materials`` (F,) int64, ``face_smooth`` (F,) bool, ``colours`` (C, 3),
-        ``uv_maps`` list of (name, (C, 2)). Faces wind like their parent face of the user's mesh.
+        ``uv_maps`` list of (name, (C, 2)), ``attributes`` list of (name, domain, data_type,
+        values per output vertex, corner or face). Faces wind like their parent face of the
+        user's mesh.
     """
     sizes = output.face_sizes[faces]
     owner, local, starts = _ragged(sizes)
@@ -373,11 +375,39 @@ def part_mesh(part, output, faces):
     vpos = np.zeros((verts.size, 3))
     np.add.at(vpos, inverse, pos)
     vpos /= np.bincount(inverse, minlength=verts.size)[:, None]
+    attributes = [(name, domain, kind, _carry(values, domain, eval_src, weights, part, parent,
+                                              inverse, verts.size))
+                  for name, domain, kind, values in part.attributes]
     return dict(vertices=vpos, corner_verts=inverse.astype(np.int64), face_starts=starts,
+                attributes=attributes,
                 face_sizes=sizes.astype(np.int64), face_materials=part.face_materials[parent],
                 face_smooth=part.face_smooth[parent], colours=colours,
                 uv_maps=[(name, transfer.interpolate(uv, eval_src, weights))
                          for name, uv in part.uv_maps])
+
+
+def _carry(values, domain, eval_src, weights, part, parent, inverse, n_verts):
+    """An attribute of the evaluated mesh on the baked mesh's points, corners or faces.
+
+    Real values are interpolated; integer and boolean ones take the value of the heaviest source.
+    A point value is the mean over the output vertex's corners (they agree on a shared vertex).
+    """
+    if domain == "FACE":
+        return values[parent]
+    src = part.corner_verts[eval_src] if domain == "POINT" else eval_src
+    if values.dtype.kind == "f":
+        per_corner = transfer.interpolate(values, src, weights)
+    else:
+        per_corner = values[src[np.arange(src.shape[0]), weights.argmax(axis=1)]]
+    if domain == "CORNER":
+        return per_corner
+    if per_corner.dtype.kind == "f":
+        out = np.zeros((n_verts, per_corner.shape[1]))
+        np.add.at(out, inverse, per_corner)
+        return out / np.bincount(inverse, minlength=n_verts)[:, None]
+    out = np.empty((n_verts, per_corner.shape[1]), dtype=per_corner.dtype)
+    out[inverse] = per_corner
+    return out
 
 
 def _ragged(counts):
@@ -407,6 +437,9 @@ def new_mesh(name, arrays, part, materials):
             mesh.uv_layers.active = layer
         if i == part.uv_render:
             layer.active_render = True
+    for name, domain, kind, values in arrays["attributes"]:
+        prop, _, dtype = ATTRIBUTE_TYPES[kind]
+        mesh.attributes.new(name, kind, domain).data.foreach_set(prop, values.astype(dtype).ravel())
     for mat in materials:
         mesh.materials.append(mat)
     mesh[PROP_BAKED] = 1

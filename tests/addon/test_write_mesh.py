@@ -242,6 +242,40 @@ def test_clear_bake_keeps_a_fake_user_the_user_had(package):
     assert obj.data.use_fake_user
 
 
+def test_user_attributes_are_carried(package):
+    # Oracles: a point attribute linear in position (interpolation reproduces it exactly at
+    # every baked vertex), a face attribute (each baked face carries its parent's value, found
+    # from the face centre), a corner colour attribute set to the corner's position (colour =
+    # x, y, 0.5 at each baked corner).
+    lamp()
+    verts = [(0, 0, 0), (1, 0, 0), (2, 0, 0), (0, 1, 0), (1, 1, 0), (2, 1, 0)]
+    obj = mesh_object("Plane", verts, [(0, 1, 4, 3), (1, 2, 5, 4)], material("grey"))
+    mesh = obj.data
+    co = np.array(verts, dtype=np.float64)
+    mesh.attributes.new("height", "FLOAT", "POINT").data.foreach_set(
+        "value", (co[:, 0] + 2 * co[:, 1]).astype(np.float32))
+    mesh.attributes.new("room", "INT", "FACE").data.foreach_set("value", np.array([7, 9], np.int32))
+    cv = np.array([lp.vertex_index for lp in mesh.loops])
+    rgba = np.c_[co[cv][:, :2], np.full(8, 0.5), np.ones(8)].astype(np.float32)
+    mesh.color_attributes.new("Col", "FLOAT_COLOR", "CORNER").data.foreach_set("color",
+                                                                               rgba.ravel())
+    bake_fake()
+    baked = obj.data
+    bco = np.array([v.co for v in baked.vertices])
+    got = np.empty(len(baked.vertices), dtype=np.float32)
+    baked.attributes["height"].data.foreach_get("value", got)
+    np.testing.assert_allclose(got, bco[:, 0] + 2 * bco[:, 1], atol=F32_ATOL)
+    rooms = np.empty(len(baked.polygons), dtype=np.int32)
+    baked.attributes["room"].data.foreach_get("value", rooms)
+    centres = np.array([p.center for p in baked.polygons])
+    np.testing.assert_array_equal(rooms, np.where(centres[:, 0] < 1.0, 7, 9))
+    bcv = np.array([lp.vertex_index for lp in baked.loops])
+    col = np.empty(len(baked.loops) * 4, dtype=np.float32)
+    baked.attributes["Col"].data.foreach_get("color", col)
+    np.testing.assert_allclose(col.reshape(-1, 4)[:, :2], bco[bcv][:, :2], atol=F32_ATOL)
+    assert baked.color_attributes.active_color_name == write.ATTRIBUTE
+
+
 # ------------------------------------------------------------------------------------------ UVs
 
 
