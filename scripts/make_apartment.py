@@ -1,12 +1,21 @@
-"""Build sample_blends/apartment.blend: a 12 x 8 x 2.8 m apartment/gallery, > 20,000 faces.
+"""Build sample_blends/apartment.blend: a 12 x 8 x 2.8 m apartment/gallery, modelled coarse.
 
-Run: ``.venv/bin/python scripts/make_apartment.py [--face-size 0.13] [--out ...]``
+Run with the oldest supported Blender's bpy (Blender 5 writes files 4.x cannot open)::
+
+    .venv-bpy42/bin/python scripts/make_apartment.py              # sample_blends/apartment.blend
+    .venv-bpy42/bin/python scripts/make_apartment.py --face-size 0.13 \
+        --out bench/scenes/apartment.blend                         # the benchmark's copy
+
+By default surfaces are modelled as an architect would (see make_office.py): one quad per wall
+side, floor, ceiling, plinth side and luminaire, doorways and the window as the few quads around
+them. ``--face-size`` meshes them as grids instead: the benchmark's pre-meshed copy
+(bench/scenes/), > 20,000 faces at 0.13 m.
 
 Three rooms: two 6 x 4 m rooms on the west side (separated by a 0.1 m thick wall with a doorway)
 and a 6 x 8 m gallery on the east, joined through two doorways in a 0.1 m thick wall; a window
 opening (no glass) in the gallery's south wall; six plinths in the gallery; one luminaire panel in
 each small room and four in the gallery (5 cm below the ceiling, emitting from both faces in
-Cycles). Faces <= 0.13 m give ~25,000 faces: at the default 0.5 m patch size our engine needs one
+Cycles). In the benchmark's copy, faces <= 0.13 m give ~25,000 faces: at the default 0.5 m patch size our engine needs one
 patch per face, i.e. well over 20,000 patches. Same materials and conventions as make_office.py.
 """
 
