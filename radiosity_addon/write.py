@@ -89,10 +89,21 @@ def original_mesh(obj):
 
 
 def _show_original(obj):
-    """Swap the original mesh and modifier flags back in; return the baked mesh (kept alive)."""
+    """Swap the original mesh and modifier flags back in; return the baked mesh (kept alive).
+
+    Materials the user put into the baked mesh's slots while baked (the material slot list edits
+    the object's mesh) go to the original's slots: a re-bake and Clear Bake keep that edit.
+    """
     baked = obj.data
     baked.use_fake_user = True            # zero users for a moment must not lose it
-    obj.data = obj[PROP_ORIGINAL]
+    original = obj[PROP_ORIGINAL]
+    mats = original.materials
+    for i, mat in enumerate(baked.materials):
+        if i >= len(mats):
+            mats.append(mat)
+        elif mats[i] != mat:
+            mats[i] = mat
+    obj.data = original
     flags = obj.get(PROP_MODIFIERS, {})
     for mod in obj.modifiers:
         if mod.name in flags:

@@ -168,10 +168,11 @@ def test_apply_dispatches_on_result_output(package):
     assert write.is_baked(floor) and len(floor.data.polygons) == 4
     row = [r for r in report["output_objects"] if r["object"] == "Floor"][0]
     assert row == dict(object="Floor", input_faces=1, output_vertices=9, output_faces=4)
-    write.clear_bake([floor])
+    # Existing Vertices over a baked object: the bake is cleared, the colours go on the original.
     result.output = None
     job.apply(bpy.context, bake_input, result)
     assert not write.is_baked(floor) and len(floor.data.polygons) == 1
+    assert not any(m.get(write.PROP_BAKED) for m in bpy.data.meshes)
     assert write.ATTRIBUTE in floor.data.color_attributes
 
 
@@ -274,6 +275,26 @@ def test_user_attributes_are_carried(package):
     baked.attributes["Col"].data.foreach_get("color", col)
     np.testing.assert_allclose(col.reshape(-1, 4)[:, :2], bco[bcv][:, :2], atol=F32_ATOL)
     assert baked.color_attributes.active_color_name == write.ATTRIBUTE
+
+
+def test_material_edits_while_baked_reach_the_original(package):
+    # The slot list edits the mesh the object shows (the baked one): a material changed or added
+    # there must survive a re-bake (which starts from the original) and Clear Bake.
+    lamp()
+    fv, ff = square(2.0)
+    obj = mesh_object("Floor", fv, ff, material("grey"))
+    original = obj.data
+    bake_fake()
+    red, blue = material("red", (0.8, 0.1, 0.1)), material("blue", (0.1, 0.1, 0.8))
+    obj.material_slots[0].material = red
+    obj.data.materials.append(blue)
+    ext = extraction()
+    red_row = ext.arrays["material_names"].index("red")
+    assert red_row in ext.arrays["face_materials"]        # the re-bake reads the new material
+    bake_fake()
+    assert list(obj.data.materials) == [red, blue]
+    write.clear_bake([obj])
+    assert obj.data == original and list(original.materials) == [red, blue]
 
 
 # ------------------------------------------------------------------------------------------ UVs
