@@ -72,3 +72,19 @@ def test_one_quad_floor_bakes_the_pool_of_light(package):
     assert bpy.ops.radiosity.clear() == {"FINISHED"}
     assert floor.data == original and len(original.polygons) == 1
     assert not any(m.get(write.PROP_BAKED) for m in bpy.data.meshes)
+
+
+def test_shared_mesh_needs_no_make_single_user(package):
+    # Mesh output gives every object its own baked mesh: a shared mesh bakes as it is, and each
+    # object's baked mesh carries its own light (the one nearer the lamp is brighter).
+    floor, lamp = one_quad_room()
+    twin = bpy.data.objects.new("Twin", floor.data)
+    twin.location = (9.0, 2.0, 0.0)
+    bpy.context.scene.collection.objects.link(twin)
+    shared = floor.data
+    set_settings(bpy.context.scene, resolution=32, make_single_user=False)
+    assert bpy.ops.radiosity.bake() == {"FINISHED"}
+    assert floor.data != twin.data and shared not in (floor.data, twin.data)
+    assert read_colours(floor.data).mean() > 2 * read_colours(twin.data).mean()
+    assert bpy.ops.radiosity.clear() == {"FINISHED"}
+    assert floor.data == shared and twin.data == shared
