@@ -9,12 +9,14 @@ leaves are split where
 * the luminance differs between the leaf's vertices by more than ``contrast`` relative to the
   brighter one, never relative to less than ``DARK_FLOOR`` x the scene's mean luminance, so that
   darkness does not refine for ever (contrast-driven meshing, Lightscape, Blender 2.4x);
-* the emitters' visibility differs between the leaf's vertices (a shadow boundary passes): one
-  shadow ray from every vertex to each of ``SHADOW_SAMPLES`` fixed points on the emitters;
+* the emitters' visibility differs between the leaf's vertices (a shadow boundary passes: one
+  shadow ray from every vertex to each of ``SHADOW_SAMPLES`` fixed points on the emitters) and
+  the contrast exceeds ``SHADOW_CONTRAST`` x ``contrast``;
 * a contact line runs along the leaf (the light falls off steeply towards an object's foot) and
   the leaf is larger than ``CONTACT_ELEMENT``;
 
-never below ``min_element`` and within ``vertex_budget`` points, worst first (score: the leaf's
+(the criteria and their constants: :mod:`core.criteria`), never below ``min_element`` and
+within ``vertex_budget`` points, worst first (score: the leaf's
 area times how far it is over the threshold).
 
 The output is the conforming triangulation of the leaves (``tree.conforming()``): every output
@@ -30,8 +32,9 @@ import time
 
 import numpy as np
 
+from .criteria import (EmitterSamples, contact_edges, contact_points, dark_floor, luminance,
+                       per_leaf_scores)
 from .gather import NORMAL_DECIMALS, GatherRows, compact_rows, corner_groups, shade
-from .refine import DARK_FLOOR, LUMINANCE
 
 #: Default coarse patch size (m) of the mesh output, clamped to the scene's bounding diagonal
 #: times [COARSE_MIN_FRACTION, COARSE_MAX_FRACTION]: 1 m keeps a room's walls at a few dozen
@@ -40,12 +43,6 @@ from .refine import DARK_FLOOR, LUMINANCE
 COARSE_PATCH = 1.0
 COARSE_MIN_FRACTION = 1.0 / 400.0
 COARSE_MAX_FRACTION = 1.0 / 8.0
-
-#: Fixed emitter points that the shadow test casts rays to from every element vertex.
-SHADOW_SAMPLES = 16
-
-#: Leaves along a contact line are split down to this size (m) (or min_element if larger).
-CONTACT_ELEMENT = 0.25
 
 #: Refinement stops after this many levels (a 1 m patch halved 12 times is 0.24 mm).
 MAX_LEVELS = 12
@@ -58,10 +55,6 @@ BUDGET_RETRIES = 6
 
 #: Hemicubes per point_rows call.
 GATHER_BATCH = 64
-
-#: Alone points lie within the contacts' tolerance of a contact line; lines are tested against
-#: points in chunks of this many (point, line) pairs.
-PAIR_CHUNK = 2_000_000
 
 #: Inset directions of per-corner (alone) gathers are matched after rounding to these decimals.
 DIRECTION_DECIMALS = 2
@@ -81,143 +74,33 @@ def coarse_patch_size(scene, patch_size=None):
     return float(np.clip(COARSE_PATCH, COARSE_MIN_FRACTION * diag, COARSE_MAX_FRACTION * diag))
 
 
-def luminance(rgb):
-    """(n,) luminance of (n, 3) scene-linear RGB."""
-    return np.asarray(rgb, dtype=np.float64) @ LUMINANCE
+class _Seen:
+    """The patches a gather draws (what :func:`core.hemicube.point_rows` reads), a subset."""
+
+    def __init__(self, patches, keep):
+        self.keep = keep
+        self.centres = patches.centres[keep]
+        self.normals = patches.normals[keep]
+        self.corners = patches.corners[keep]
+        self.areas = patches.areas[keep]
+
+    def radiance(self, node_radiance):
+        """(2K, 3) radiance of the kept nodes from the full (2P, 3)."""
+        P = node_radiance.shape[0] // 2
+        return np.concatenate([node_radiance[self.keep], node_radiance[P + self.keep]])
 
 
-def dark_floor(patches, patch_radiance, scene):
-    """The contrast test's absolute floor: DARK_FLOOR x the area-weighted mean luminance of the
-    non-emitting patches (tiny positive if the scene is black)."""
-    emitting = np.any(np.asarray(scene.emission)[patches.material] > 0, axis=1)
-    a = patches.areas[~emitting]
-    y = luminance(patch_radiance)[~emitting]
-    mean = float((a * y).sum() / a.sum()) if a.sum() > 0 else 0.0
-    return DARK_FLOOR * mean if mean > 0 else 1e-300
+def _seen_subset(patches, radiance, power):
+    """The patches the gathers draw: those whose front or back node has light.
 
-
-def face_variation(scene, patches, patch_radiance, contrast):
-    """How much the light varies inside the user's faces (the 'vertices' output's loss).
-
-    A face varies when the luminance of its patches spans more than ``contrast`` relative to
-    its brightest (floored as in the refinement): one colour per user corner cannot show that.
-
-    Returns
-    -------
-    dict
-        ``faces_varying`` (count), ``area_share_varying`` (area fraction of the non-emitting
-        faces), ``worst_faces`` (labels of up to 5 faces, largest area first).
-    """
-    floor = dark_floor(patches, patch_radiance, scene)
-    y = luminance(patch_radiance)
-    F = scene.n_faces
-    hi = np.full(F, -np.inf)
-    lo = np.full(F, np.inf)
-    np.maximum.at(hi, patches.face, y)
-    np.minimum.at(lo, patches.face, y)
-    emits = np.any(np.asarray(scene.emission)[scene.face_materials] > 0, axis=1)
-    has = np.isfinite(hi) & scene.face_valid & ~emits
-    var = np.zeros(F, dtype=bool)
-    var[has] = (hi[has] - lo[has]) / np.maximum(hi[has], floor) > contrast
-    total = float(scene.face_areas[has].sum())
-    share = float(scene.face_areas[var].sum()) / total if total > 0 else 0.0
-    worst = np.flatnonzero(var)[np.argsort(-scene.face_areas[var])][:5]
-    return dict(faces_varying=int(var.sum()), area_share_varying=share,
-                worst_faces=[scene.face_label(f) for f in worst])
-
-
-def unlit_late_nodes(scene, patches, active, late, resolution):
-    """Which of the late front nodes (never reached by discovery) need no hemicube row.
-
-    ``bake._run`` computes a row for every unreached front node, because a small patch can slip
-    between the pixels of every hemicube that looks at it. A whole face none of whose patches
-    was reached, and which is large enough to cover several pixels of a hemicube at the far
-    end of the scene, did not slip: no light reaches it. Its patches stay black without rows.
-    (A 100 x 100 m ground plane outside a closed room: 10,000 rows saved.)
-
-    Returns
-    -------
-    (len(late),) bool
+    A patch that light never reaches on either side cannot stand between a lit point and a lit
+    patch (the lit patch would light it), so leaving it out changes no row that matters, and
+    a 100 x 100 m ground plane outside a closed room no longer slows every hemicube.
     """
     P = patches.areas.size
-    face_reached = np.zeros(scene.n_faces, dtype=bool)
-    face_reached[patches.face[np.flatnonzero(active[:P])]] = True
-    diag = scene.bounding_diagonal()
-    pixel = (2.0 / resolution) ** 2          # solid angle of a pixel at the top face's centre
-    big = scene.face_areas >= 4.0 * pixel * diag * diag
-    f = patches.face[late]
-    return ~face_reached[f] & big[f]
-
-
-def contact_points(points, lines, chunk=PAIR_CHUNK):
-    """(V,) bool: points within the contacts' tolerance of one of their lines.
-
-    Parameters
-    ----------
-    points : (V, 3) float64
-    lines : core.contacts.Contacts or None
-    """
-    out = np.zeros(points.shape[0], dtype=bool)
-    if lines is None or lines.a.shape[0] == 0 or points.shape[0] == 0:
-        return out
-    key = np.round(np.concatenate([lines.a, lines.u, lines.length[:, None]], axis=1), 9)
-    _, first = np.unique(key, axis=0, return_index=True)
-    a, u, w, length = lines.a[first], lines.u[first], lines.w[first], lines.length[first]
-    n = np.cross(u, w)
-    tol = lines.tol
-    step = max(1, chunk // a.shape[0])
-    for s in range(0, points.shape[0], step):
-        rel = points[s:s + step, None, :] - a[None]
-        t = np.einsum("pkj,kj->pk", rel, u)
-        on = (np.abs(np.einsum("pkj,kj->pk", rel, w)) <= tol) \
-            & (np.abs(np.einsum("pkj,kj->pk", rel, n)) <= tol) \
-            & (t >= -tol) & (t <= length[None] + tol)
-        out[s:s + step] = on.any(axis=1)
-    return out
-
-
-class _Emitters:
-    """Fixed sample points on the emitters and the shadow rays to them."""
-
-    def __init__(self, scene, patches, rng):
-        from .exact import ray_triangles
-        from .raycast import build_bvh
-
-        le = luminance(np.asarray(scene.emission)[patches.material])
-        emitting = np.flatnonzero(le > 0)
-        self.n = 0
-        if emitting.size == 0:
-            return
-        weight = patches.areas[emitting] * le[emitting]
-        pick = emitting[rng.choice(emitting.size, size=SHADOW_SAMPLES, p=weight / weight.sum())]
-        c = patches.corners[pick]
-        u, v = rng.random(SHADOW_SAMPLES), rng.random(SHADOW_SAMPLES)
-        # A point inside the patch (triangles repeat their last corner: the map still lands
-        # inside them).
-        self.points = ((1 - u) * (1 - v))[:, None] * c[:, 0] + (u * (1 - v))[:, None] * c[:, 1] \
-            + (u * v)[:, None] * c[:, 2] + ((1 - u) * v)[:, None] * c[:, 3]
-        self.normals = patches.normals[pick]
-        self.bvh = build_bvh(ray_triangles(patches)[0])
-        self.offset = 1e-6 * max(float(np.ptp(patches.corners.reshape(-1, 3), axis=0).max()), 1.0)
-        self.n = SHADOW_SAMPLES
-
-    def visibility(self, points, normals):
-        """(S,) int64 bit masks: bit k set when emitter sample k is visible from the point."""
-        from .raycast import any_hit
-
-        S = points.shape[0]
-        out = np.zeros(S, dtype=np.int64)
-        if self.n == 0 or S == 0:
-            return out
-        o = points + self.offset * normals
-        d = self.points[None, :, :] - o[:, None, :]                 # (S, K, 3)
-        facing = (np.einsum("skj,sj->sk", d, normals) > 0) \
-            & (np.einsum("skj,kj->sk", d, self.normals) < 0)
-        s, k = np.nonzero(facing)
-        vis = np.zeros((S, self.n), dtype=bool)
-        if s.size:
-            vis[s, k] = ~any_hit(self.bvh, o[s], d[s, k], t_max=1.0 - 1e-6)
-        return (vis.astype(np.int64) << np.arange(self.n, dtype=np.int64)).sum(axis=1)
+    has = np.any(radiance[:P] > 0, axis=1) | np.any(radiance[P:] > 0, axis=1) \
+        | np.any(power[:P] > 0, axis=1) | np.any(power[P:] > 0, axis=1)
+    return _Seen(patches, np.flatnonzero(has))
 
 
 class AdaptiveState:
@@ -235,6 +118,8 @@ class AdaptiveState:
     lit : (P,) bool
         Patches that received light in the bake (relight rebuilds the mesh if more do).
     elements : core.elements.Elements or None
+    seen : _Seen
+        The (lit) patches or elements the gathers drew.
     user : (C,) int64
         Output corner whose colour each user corner takes (-1: none, a dropped face).
     """
@@ -247,7 +132,7 @@ class AdaptiveState:
         L = node_radiance
         if self.elements is not None:
             L = self.elements.node_radiance(scene, node_radiance)
-        inc = self.rows.incident(L)
+        inc = self.rows.incident(self.seen.radiance(L))
         return shade(scene, self.material, inc)[self.entry]
 
 
@@ -324,38 +209,6 @@ def _group_keys(leaf_scene, groups, alone):
     return keys, vertex
 
 
-def _per_leaf(conf, values, n_leaves, fn, fill):
-    """Reduce per-corner ``values`` over the leaf of each corner's output face."""
-    face_of = np.repeat(np.arange(conf["face_sizes"].size), conf["face_sizes"])
-    out = np.full(n_leaves, fill, dtype=values.dtype)
-    fn.at(out, conf["face_leaf"][face_of], values)
-    return out
-
-
-def _scores(tree, conf, corner_y, corner_vis, corner_alone, emitting_leaf, floor, settings):
-    """(E,) float: how badly each leaf needs splitting (0: not at all)."""
-    E = tree.leaves.shape[0]
-    hi = _per_leaf(conf, corner_y, E, np.maximum, -np.inf)
-    lo = _per_leaf(conf, corner_y, E, np.minimum, np.inf)
-    has = np.isfinite(hi)
-    diff = np.zeros(E)
-    diff[has] = (hi[has] - lo[has]) / np.maximum(hi[has], floor)
-    area = np.asarray(tree.areas, dtype=np.float64)
-    score = np.where(diff > settings.contrast, area * diff / settings.contrast, 0.0)
-    vmax = _per_leaf(conf, corner_vis, E, np.maximum, np.int64(-1))
-    vmin = _per_leaf(conf, corner_vis, E, np.minimum, np.int64(np.iinfo(np.int64).max))
-    shadow = has & (vmax != vmin)
-    score = np.maximum(score, np.where(shadow, area, 0.0))
-    touches = _per_leaf(conf, corner_alone.astype(np.int64), E, np.maximum, np.int64(0)) > 0
-    size = np.asarray(tree.sizes, dtype=np.float64)
-    contact = touches & (size > max(CONTACT_ELEMENT, 2.0 * settings.min_element))
-    score = np.maximum(score, np.where(contact, 0.5 * area, 0.0))
-    score[emitting_leaf] = 0.0
-    score[size < 2.0 * settings.min_element] = 0.0
-    return score, dict(contrast=int(np.count_nonzero(diff > settings.contrast)),
-                       shadow=int(np.count_nonzero(shadow)), contact=int(np.count_nonzero(contact)))
-
-
 def _split_within(tree, score, budget):
     """Split the worst leaves that fit in ``budget`` points; None when none fits."""
     cand = np.flatnonzero(score > 0)
@@ -421,21 +274,27 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
             monitor=None if monitor is None else SubMonitor(monitor, 0.0, 0.2))
         seen, seen_L = elements.patches, elements.node_radiance(scene, L)
         gather_monitor = None if monitor is None else SubMonitor(monitor, 0.2, 1.0)
+    power = np.asarray(incident)
+    if elements is not None:                 # an element has light if its patch has
+        power = np.concatenate([power[elements.parent], power[P + elements.parent]])
+    seen = _seen_subset(seen, seen_L, power)
+    seen_L = seen.radiance(seen_L)
     emission = np.asarray(scene.emission)
     lit = np.any(np.asarray(incident)[:P] > 0, axis=1) \
         | np.any(emission[patches.material] > 0, axis=1)
     floor = dark_floor(patches, L[:P], scene)
     rng = np.random.default_rng([settings.seed, 2])
-    emitters = _Emitters(scene, patches, np.random.default_rng([settings.seed, 4]))
+    emitters = EmitterSamples(scene, patches, np.random.default_rng([settings.seed, 4]))
     cache = _Cache(2 * seen.areas.size)
     tree = ElementTree.from_patches(scene, patches)
+    outline = contact_edges(scene, tree, contacts)
     steps = []
     budget_hit = False
     for level in range(MAX_LEVELS + 1):
         t0 = time.perf_counter()
         conf = tree.conforming()
         leaf_scene = _leaf_scene(scene, tree, conf)
-        alone = contact_points(tree.points, contacts)
+        alone = contact_points(tree.points, contacts) | contact_points(tree.points, outline)
         groups = corner_groups(leaf_scene, crease_angle=settings.crease_angle, alone=alone)
         keys, vertex = _group_keys(leaf_scene, groups, alone)
         ids = cache.lookup(keys)
@@ -460,9 +319,9 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
             inc[pos_in_new[s:s + GATHER_BATCH]] = vals.astype(np.float64) @ seen_L[cols]
             batches.append((pos_in_new[s:s + GATHER_BATCH], cols, vals))
             if gather_monitor is not None:
-                gather_monitor.update(min(1.0 - 0.5 ** level * (1.0 - (s + g.size) / go.size)
-                                          * 0.5, 0.99), f"mesh: level {level}, "
-                                      f"{tree.points.shape[0]} points")
+                done = (s + g.size) / go.size        # level k fills [1 - 2^-k, 1 - 2^-(k+1)]
+                gather_monitor.update(1.0 - 0.5 ** level * (1.0 - 0.5 * done),
+                                      f"mesh: level {level}, {tree.points.shape[0]} points")
         if go.size:
             vis[pos_in_new] = emitters.visibility(groups.points[go], groups.normals[go])
         gathered = np.zeros(new.size, dtype=bool)
@@ -483,7 +342,7 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         corner_vis = np.zeros(C, dtype=np.int64)
         corner_vis[ok] = cache.vis[ids][groups.group[ok]]
         emitting_leaf = np.any(emission[np.asarray(tree.material)] > 0, axis=1)
-        score, marked = _scores(tree, conf, luminance(corner_value), corner_vis,
+        score, marked = per_leaf_scores(tree, conf, luminance(corner_value), corner_vis,
                                 alone[leaf_scene.corner_verts], emitting_leaf, floor, settings)
         step.update(marked)
         split = _split_within(tree, score, settings.vertex_budget) if score.any() else None
@@ -501,11 +360,14 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
     corner_entry[ok] = entry[groups.group[ok]]
     state = AdaptiveState(mesh=mesh, entry=corner_entry,
                           material=cache.keys[u_ids, 1].astype(np.int64),
-                          rows=cache.rows_for(u_ids), lit=lit, elements=elements,
+                          rows=cache.rows_for(u_ids), lit=lit, elements=elements, seen=seen,
                           user=_user_corners(scene, mesh))
     report = dict(levels=steps, leaves=int(tree.leaves.shape[0]),
                   points=int(tree.points.shape[0]), budget_hit=budget_hit,
                   per_object=per_object_report(scene, mesh))
+    if elements is not None:
+        report["elements"] = dict(elements=int(elements.parent.size),
+                                  gathered=int(elements.computed.size), levels=elements.levels)
     return mesh, state, report
 
 
@@ -573,9 +435,15 @@ def mesh_colours(scene, settings, patches, node_radiance, incident, state, conta
                                    corner_colours=state.colours(scene, node_radiance))
         state = AdaptiveState(**{**state.__dict__, "mesh": mesh})
         report = dict(rebuilt=False, per_object=per_object_report(scene, mesh))
+        if state.elements is not None:
+            e = state.elements
+            report["elements"] = dict(elements=int(e.parent.size), gathered=int(e.computed.size),
+                                      levels=e.levels)
     else:
+        rebuilt = isinstance(state, AdaptiveState)       # a relight that lights new patches
         mesh, state, report = adaptive_output(scene, settings, patches, node_radiance, incident,
                                               contacts=contacts, monitor=monitor)
+        report["rebuilt"] = rebuilt
     colours = np.zeros((scene.n_corners, 3))
     has = state.user >= 0
     colours[has] = mesh.corner_colours[state.user[has]]

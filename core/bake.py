@@ -222,11 +222,14 @@ class BakeSettings:
     element_levels: int = 2
     element_threshold: float = 0.3
     contact_cuts: bool = True
-    # --- adaptive output mesh (issue 9): defaults measured in bench/bench_adaptive.py
+    # --- adaptive output mesh (issue 9): defaults measured in bench/bench_adaptive.py:
+    # contrast 0.1 (one-quad floor 0.40 % mean error with 2291 vertices; 0.2: 0.51 %, 964),
+    # min_element 0.05 m (box shadow 1.22 % with 2648 vertices; 0.02 m: 1.10 % with 14448),
+    # vertex_budget 100k (about 1 ms per gathered vertex: bounds the mesh stage near 2 min)
     output: str = "mesh"
     contrast: float = 0.1
-    min_element: float = 0.02
-    vertex_budget: int = 200_000
+    min_element: float = 0.05
+    vertex_budget: int = 100_000
 
     def __post_init__(self):
         def bad(name, allowed):
@@ -305,7 +308,7 @@ class BakeResult:
         ``matrix_bytes`` (the dense matrix built for the solve, or the row cache of a
         matrix-free solve; freed after it), ``warnings``; ``mesh`` with ``output='mesh'``:
         see :func:`core.adaptive.adaptive_output`; ``face_variation`` with
-        ``output='vertices'``: see :func:`core.adaptive.face_variation`).
+        ``output='vertices'``: see :func:`core.criteria.face_variation`).
     output : core.outmesh.OutputMesh or None
         The radiosity mesh (``output='mesh'``), None with ``output='vertices'``.
     """
@@ -763,7 +766,7 @@ def _run(scene, settings, patches, store, active, monitor, timings, t_start, war
     # that only unlit nodes see (the inside of a box, seen from the floor under it) stays out.
     late = np.flatnonzero(~active[:P])
     if settings.output == "mesh" and len(late):       # issue 9: unlit surfaces cost nothing
-        from .adaptive import unlit_late_nodes
+        from .criteria import unlit_late_nodes
         late = late[~unlit_late_nodes(scene, patches, active, late, settings.resolution)]
     if len(late) and not overflow:
         active, overflow = _discover(store, rows_fn, allowed, active, late, monitor,
@@ -891,6 +894,7 @@ def _run(scene, settings, patches, store, active, monitor, timings, t_start, war
             scene, settings, patches, node_radiance, incident, gather, contact_lines, monitor,
             lambda: corner_colours(scene, patches, patch_radiance,
                                    crease_angle=settings.crease_angle))
+        element_report = mesh_report.pop("elements", None)
     elif settings.corners == "gather":
         from .gather import corner_groups, gather_rows, gathered_colours
         if gather is None:
@@ -966,7 +970,7 @@ def _run(scene, settings, patches, store, active, monitor, timings, t_start, war
     if mesh_report is not None:
         report["mesh"] = mesh_report
     elif settings.output == "vertices":
-        from .adaptive import face_variation
+        from .criteria import face_variation
         report["face_variation"] = face_variation(scene, patches, patch_radiance,
                                                   settings.contrast)
     state = _State(scene, settings, patches, store, active, gather, alone)

@@ -17,8 +17,8 @@ from .outmesh import OutputMesh
 #: edge leaves sines around 1e-15; a genuine element corner is many orders of magnitude above.
 FLAT_SINE = 1e-9
 
-#: Barycentric weights down to this (negative) are rounding and are clipped to 0.
-WEIGHT_CLIP = 1e-9
+#: Point-triangle pairs evaluated at once by parent_weights (memory: ~0.5 kB per pair).
+PAIR_CHUNK = 1 << 20
 
 
 def clip_convex_rings(pos, count, normals):
@@ -257,9 +257,30 @@ def parent_weights(scene, face_parent_of_corner, positions):
     inv = inv.reshape(-1)
     tri, start = _face_triangles(scene, faces)
     n_tri = start[1:] - start[:-1]
-    # Every point against every triangle of its face (n-gons: a few dozen), keep the best.
-    pt, k, _ = ragged(n_tri[inv])
-    t = start[inv[pt]] + k
+    if np.any(n_tri == 0):
+        f = int(faces[np.flatnonzero(n_tri == 0)[0]])
+        raise ValueError(f"face_parent_of_corner names {scene.face_label(f)}, which has no "
+                         f"triangle of non-zero area")
+    # Every point against every triangle of its face (n-gons: a few dozen), keep the best; in
+    # chunks of at most PAIR_CHUNK pairs so a many-sided floor under 1e5 points stays in memory.
+    per_point = n_tri[inv]
+    ends = np.cumsum(per_point)
+    sources = np.zeros((C, 3), np.int64)
+    weights = np.zeros((C, 3), np.float64)
+    lo = 0
+    while lo < C:
+        base = ends[lo - 1] if lo else 0
+        hi = max(int(np.searchsorted(ends, base + PAIR_CHUNK, side="right")), lo + 1)
+        s, w = _best_triangle(scene, tri, start[inv[lo:hi]], per_point[lo:hi], x[lo:hi])
+        sources[lo:hi], weights[lo:hi] = s, w
+        lo = hi
+    return sources, weights
+
+
+def _best_triangle(scene, tri, first_tri, n_tri, x):
+    """Sources and weights of points x (n, 3) over the best of their n_tri triangles."""
+    pt, k, _ = ragged(n_tri)
+    t = first_tri[pt] + k
     verts = np.asarray(scene.vertices, dtype=np.float64)
     A, B, Cc = (verts[np.asarray(scene.corner_verts)[tri[t, i]]] for i in range(3))
     # Relative to A, so large coordinates (a km from the origin) lose nothing.
@@ -271,16 +292,13 @@ def parent_weights(scene, face_parent_of_corner, positions):
     safe = np.where(ok, den, 1.0)
     wb = (d11 * d20 - d01 * d21) / safe
     wc = (d00 * d21 - d01 * d20) / safe
-    wa = 1.0 - wb - wc
-    w = np.stack([wa, wb, wc], axis=1)
+    w = np.stack([1.0 - wb - wc, wb, wc], axis=1)
     score = np.where(ok, w.min(axis=1), -np.inf)
-    # Best triangle per point: the largest smallest weight (inside if >= 0).
+    # Best triangle per point: the largest smallest weight (inside if >= 0); pt is sorted.
     order = np.lexsort((-score, pt))
-    first = np.r_[0, np.flatnonzero(np.diff(pt[order])) + 1]
-    best = order[first]
-    w = w[best]
-    w = np.where(w < 0, np.where(w > -WEIGHT_CLIP, 0.0, w), w)
-    w = np.clip(w, 0.0, None)
+    best = order[np.r_[0, np.flatnonzero(np.diff(pt[order])) + 1]]
+    # Points on an edge or outside by rounding get tiny negative weights: clip, renormalise.
+    w = np.clip(w[best], 0.0, None)
     w /= w.sum(axis=1, keepdims=True)
     return tri[t[best]], w
 
@@ -312,7 +330,12 @@ def output_mesh(scene, tree, polygons, corner_colours):
                          f"corner; got {colours.shape}")
     parent = np.asarray(polygons["face_parent"], dtype=np.int64)
     face_of_corner = np.repeat(np.arange(sizes.size), sizes)
-    sources, weights = parent_weights(scene, parent[face_of_corner], tree.points[cv])
+    # Weights depend on (point, scene face) only: compute them once per pair.
+    pair = np.stack([cv, parent[face_of_corner]], axis=1)
+    uniq, inv = np.unique(pair, axis=0, return_inverse=True)
+    inv = inv.reshape(-1)
+    sources, weights = parent_weights(scene, uniq[:, 1], tree.points[uniq[:, 0]])
+    sources, weights = sources[inv], weights[inv]
     return OutputMesh(vertices=np.asarray(tree.points, dtype=np.float64), corner_verts=cv,
                       face_starts=np.asarray(polygons["face_starts"], dtype=np.int64),
                       face_sizes=sizes, face_parent=parent, corner_colours=colours,

@@ -315,11 +315,13 @@ def _weld(xyz, obj, size):
     uniq, inv = np.unique(rows, axis=0, return_inverse=True)
     inv = inv.reshape(-1)
     n = uniq.shape[0]
+    if n == 0:
+        return np.zeros((0, 3)), np.zeros(0, np.int64)
     tol = np.full(n, np.inf)
     np.minimum.at(tol, inv, WELD_REL * size)
     tol = np.where(np.isfinite(tol), tol, 0.0)
     pts, uobj = uniq[:, 1:], uniq[:, 0].astype(np.int64)
-    cell = 2.0 * float(tol.max()) if n else 0.0
+    cell = 2.0 * float(tol.max())
     ii, jj = [], []
     if cell > 0:
         base = pts.min(axis=0)
@@ -369,7 +371,8 @@ def _conform_level0(points, pid, normals):
     e_pos = slots[use].astype(np.float64)
     e_pt = pid[use]
     extra = False
-    for _ in range(64):                         # rounds; each adds a point per edge
+    active = None                   # points where a new pair can appear (None: all)
+    while True:                     # rounds: each inserts a point into every edge with one
         order = np.lexsort((e_pos, e_leaf))
         e_leaf, e_pos, e_pt = e_leaf[order], e_pos[order], e_pt[order]
         start = np.r_[True, e_leaf[1:] != e_leaf[:-1]]
@@ -381,7 +384,11 @@ def _conform_level0(points, pid, normals):
         # Entries (vertex x, far end y, edge) for both ends of every boundary edge.
         x = np.concatenate([a, b])
         y = np.concatenate([b, a])
-        i, j = pairs_by_key(x)
+        # Only edges created last round (ends in ``active``) can form a new pair; a zip of
+        # misaligned points along a long shared line advances one point per round.
+        ent = np.arange(x.size) if active is None else np.flatnonzero(np.isin(x, active))
+        i, j = pairs_by_key(x[ent])
+        i, j = ent[i], ent[j]
         keep = y[i] != y[j]
         i, j = i[keep], j[keep]
         X, Y, Q = points[x[i]], points[y[i]], points[y[j]]
@@ -397,6 +404,7 @@ def _conform_level0(points, pid, normals):
         extra = True
         edge, first = np.unique(edge, return_index=True)
         q = q[first]
+        active = np.unique(np.concatenate([a[edge], b[edge], q]))
         # Parameter along the patch's original edge slot s (from corner s to corner s + 1).
         leaf = e_leaf[edge]
         s = np.floor(e_pos[edge]).astype(np.int64)

@@ -279,3 +279,16 @@ def test_unlit_ground_outside_a_closed_room_costs_no_gathers():
     levels = result.report["mesh"]["levels"]
     assert levels[0]["unlit"] >= ground_points
     assert sum(step.get("split", 0) for step in levels) < ground_points
+    # No late hemicube rows for the ground's patches: they are not among the solved nodes.
+    ground_patches = np.count_nonzero(result.patches.face == scene.n_faces - 1)
+    assert result.report["nodes_active"] <= 2 * (result.report["patches"] - ground_patches)
+    # Relit so that the ground glows: the kept rows never saw it, so the mesh is rebuilt.
+    emission = np.array(scene.emission)
+    emission[0] = 1.0                        # material 0: the x- wall and the ground
+    glow = relight(result, emission=emission)
+    assert glow.report["mesh"]["rebuilt"]
+    g = glow.output
+    lit = np.concatenate([np.arange(s, s + n) for s, n in
+                          zip(g.face_starts[g.faces_of(np.array([scene.n_faces - 1]))],
+                              g.face_sizes[g.faces_of(np.array([scene.n_faces - 1]))])])
+    assert np.all(g.corner_colours[lit] >= 1.0)             # its own emission at least

@@ -1,0 +1,239 @@
+"""Where the adaptive radiosity mesh refines: the criteria of :mod:`core.adaptive`.
+
+Per leaf of the element tree, from the values gathered at its output corners: the luminance
+contrast between them (relative to the brighter, floored at ``DARK_FLOOR`` x the scene's mean),
+a change in which emitter points they see (shadow rays), and contact lines running along it.
+Also the measures the bake reports about light it cannot show ('vertices' output) or need not
+compute (unlit faces).
+"""
+
+import numpy as np
+
+from .refine import DARK_FLOOR, LUMINANCE
+
+#: Fixed emitter points that the shadow test casts rays to from every element vertex.
+SHADOW_SAMPLES = 16
+
+#: A leaf whose vertices see different emitter samples is split when its contrast exceeds
+#: this fraction of ``contrast`` (a shadow edge in a dim area, below the plain contrast test).
+SHADOW_CONTRAST = 0.25
+
+#: Leaves along a contact line are split down to this size (m) (or min_element if larger).
+CONTACT_ELEMENT = 0.25
+
+#: Alone points lie within the contacts' tolerance of a contact line; lines are tested against
+#: points in chunks of this many (point, line) pairs.
+PAIR_CHUNK = 2_000_000
+
+
+def luminance(rgb):
+    """(n,) luminance of (n, 3) scene-linear RGB."""
+    return np.asarray(rgb, dtype=np.float64) @ LUMINANCE
+
+
+def dark_floor(patches, patch_radiance, scene):
+    """The contrast test's absolute floor: DARK_FLOOR x the area-weighted mean luminance of the
+    non-emitting patches (tiny positive if the scene is black)."""
+    emitting = np.any(np.asarray(scene.emission)[patches.material] > 0, axis=1)
+    a = patches.areas[~emitting]
+    y = luminance(patch_radiance)[~emitting]
+    mean = float((a * y).sum() / a.sum()) if a.sum() > 0 else 0.0
+    return DARK_FLOOR * mean if mean > 0 else 1e-300
+
+
+def face_variation(scene, patches, patch_radiance, contrast):
+    """How much the light varies inside the user's faces (the 'vertices' output's loss).
+
+    A face varies when the luminance of its patches spans more than ``contrast`` relative to
+    its brightest (floored as in the refinement): one colour per user corner cannot show that.
+
+    Returns
+    -------
+    dict
+        ``faces_varying`` (count), ``area_share_varying`` (area fraction of the non-emitting
+        faces), ``worst_faces`` (labels of up to 5 faces, largest area first).
+    """
+    floor = dark_floor(patches, patch_radiance, scene)
+    y = luminance(patch_radiance)
+    F = scene.n_faces
+    hi = np.full(F, -np.inf)
+    lo = np.full(F, np.inf)
+    np.maximum.at(hi, patches.face, y)
+    np.minimum.at(lo, patches.face, y)
+    emits = np.any(np.asarray(scene.emission)[scene.face_materials] > 0, axis=1)
+    has = np.isfinite(hi) & scene.face_valid & ~emits
+    var = np.zeros(F, dtype=bool)
+    var[has] = (hi[has] - lo[has]) / np.maximum(hi[has], floor) > contrast
+    total = float(scene.face_areas[has].sum())
+    share = float(scene.face_areas[var].sum()) / total if total > 0 else 0.0
+    worst = np.flatnonzero(var)[np.argsort(-scene.face_areas[var])][:5]
+    return dict(faces_varying=int(var.sum()), area_share_varying=share,
+                worst_faces=[scene.face_label(f) for f in worst])
+
+
+def unlit_late_nodes(scene, patches, active, late, resolution):
+    """Which of the late front nodes (never reached by discovery) need no hemicube row.
+
+    ``bake._run`` computes a row for every unreached front node, because a small patch can slip
+    between the pixels of every hemicube that looks at it. A whole face none of whose patches
+    was reached, and which is large enough to cover several pixels of a hemicube at the far
+    end of the scene, did not slip: no light reaches it. Its patches stay black without rows.
+    (A 100 x 100 m ground plane outside a closed room: 10,000 rows saved.)
+
+    Returns
+    -------
+    (len(late),) bool
+    """
+    P = patches.areas.size
+    face_reached = np.zeros(scene.n_faces, dtype=bool)
+    face_reached[patches.face[np.flatnonzero(active[:P])]] = True
+    diag = scene.bounding_diagonal()
+    pixel = (2.0 / resolution) ** 2          # solid angle of a pixel at the top face's centre
+    big = scene.face_areas >= 4.0 * pixel * diag * diag
+    f = patches.face[late]
+    return ~face_reached[f] & big[f]
+
+
+class _Lines:
+    """Segments (a, u unit, w unit in-plane normal, length) with a distance tolerance."""
+
+    def __init__(self, a, u, w, length, tol):
+        self.a, self.u, self.w, self.length, self.tol = a, u, w, length, tol
+
+
+def contact_points(points, lines, chunk=PAIR_CHUNK):
+    """(V,) bool: points within the lines' tolerance of one of their segments.
+
+    Parameters
+    ----------
+    points : (V, 3) float64
+    lines : core.contacts.Contacts, _Lines or None
+    """
+    out = np.zeros(points.shape[0], dtype=bool)
+    if lines is None or lines.a.shape[0] == 0 or points.shape[0] == 0:
+        return out
+    key = np.round(np.concatenate([lines.a, lines.u, lines.length[:, None]], axis=1), 9)
+    _, first = np.unique(key, axis=0, return_index=True)
+    a, u, w, length = lines.a[first], lines.u[first], lines.w[first], lines.length[first]
+    n = np.cross(u, w)
+    tol = lines.tol
+    step = max(1, chunk // a.shape[0])
+    for s in range(0, points.shape[0], step):
+        rel = points[s:s + step, None, :] - a[None]
+        t = np.einsum("pkj,kj->pk", rel, u)
+        on = (np.abs(np.einsum("pkj,kj->pk", rel, w)) <= tol) \
+            & (np.abs(np.einsum("pkj,kj->pk", rel, n)) <= tol) \
+            & (t >= -tol) & (t <= length[None] + tol)
+        out[s:s + step] = on.any(axis=1)
+    return out
+
+
+def contact_edges(scene, tree, contacts):
+    """The level-0 edges of ``tree`` that run along a contact line, as :class:`_Lines`.
+
+    A box whose outline follows the patch edges crosses no patch, so its lines are not among
+    ``contacts``' segments; its outline vertices are (``contacts.vertices``). An edge between two
+    such points (or points on a crossing line) is taken as part of the outline, so the points
+    later put on it gather per corner too. (An edge across a footprint between two outline
+    points is taken too: its points then gather per corner, which is only slower.)
+    """
+    if contacts is None:
+        return None
+    P = tree.points
+    flagged = scene.vertices[np.flatnonzero(contacts.vertices)]
+    on = contact_points(P, contacts)
+    if flagged.shape[0]:
+        both = np.concatenate([flagged, P])
+        _, inv = np.unique(both, axis=0, return_inverse=True)
+        inv = inv.reshape(-1)
+        on |= np.isin(inv[flagged.shape[0]:], inv[:flagged.shape[0]])
+    a = tree.leaves
+    b = np.roll(a, -1, axis=1)
+    edge = (a != b) & on[a] & on[b]
+    leaf = np.nonzero(edge)[0]
+    pa, pb = P[a[edge]], P[b[edge]]
+    d = pb - pa
+    length = np.linalg.norm(d, axis=1)
+    ok = length > 0
+    u = d[ok] / length[ok, None]
+    w = np.cross(np.asarray(tree.normals)[leaf[ok]], u)
+    w /= np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-300)
+    return _Lines(pa[ok], u, w, length[ok], contacts.tol)
+
+
+class EmitterSamples:
+    """Fixed sample points on the emitters and the shadow rays to them."""
+
+    def __init__(self, scene, patches, rng):
+        from .exact import ray_triangles
+        from .raycast import build_bvh
+
+        le = luminance(np.asarray(scene.emission)[patches.material])
+        emitting = np.flatnonzero(le > 0)
+        self.n = 0
+        if emitting.size == 0:
+            return
+        weight = patches.areas[emitting] * le[emitting]
+        pick = emitting[rng.choice(emitting.size, size=SHADOW_SAMPLES, p=weight / weight.sum())]
+        c = patches.corners[pick]
+        u, v = rng.random(SHADOW_SAMPLES), rng.random(SHADOW_SAMPLES)
+        # A point inside the patch (triangles repeat their last corner: the map still lands
+        # inside them).
+        self.points = ((1 - u) * (1 - v))[:, None] * c[:, 0] + (u * (1 - v))[:, None] * c[:, 1] \
+            + (u * v)[:, None] * c[:, 2] + ((1 - u) * v)[:, None] * c[:, 3]
+        self.normals = patches.normals[pick]
+        self.bvh = build_bvh(ray_triangles(patches)[0])
+        self.offset = 1e-6 * max(float(np.ptp(patches.corners.reshape(-1, 3), axis=0).max()), 1.0)
+        self.n = SHADOW_SAMPLES
+
+    def visibility(self, points, normals):
+        """(S,) int64 bit masks: bit k set when emitter sample k is visible from the point."""
+        from .raycast import any_hit
+
+        S = points.shape[0]
+        out = np.zeros(S, dtype=np.int64)
+        if self.n == 0 or S == 0:
+            return out
+        o = points + self.offset * normals
+        d = self.points[None, :, :] - o[:, None, :]                 # (S, K, 3)
+        facing = (np.einsum("skj,sj->sk", d, normals) > 0) \
+            & (np.einsum("skj,kj->sk", d, self.normals) < 0)
+        s, k = np.nonzero(facing)
+        vis = np.zeros((S, self.n), dtype=bool)
+        if s.size:
+            vis[s, k] = ~any_hit(self.bvh, o[s], d[s, k], t_max=1.0 - 1e-6)
+        return (vis.astype(np.int64) << np.arange(self.n, dtype=np.int64)).sum(axis=1)
+
+
+def _per_leaf(conf, values, n_leaves, fn, fill):
+    """Reduce per-corner ``values`` over the leaf of each corner's output face."""
+    face_of = np.repeat(np.arange(conf["face_sizes"].size), conf["face_sizes"])
+    out = np.full(n_leaves, fill, dtype=values.dtype)
+    fn.at(out, conf["face_leaf"][face_of], values)
+    return out
+
+
+def per_leaf_scores(tree, conf, corner_y, corner_vis, corner_alone, emitting_leaf, floor, settings):
+    """(E,) float: how badly each leaf needs splitting (0: not at all)."""
+    E = tree.leaves.shape[0]
+    hi = _per_leaf(conf, corner_y, E, np.maximum, -np.inf)
+    lo = _per_leaf(conf, corner_y, E, np.minimum, np.inf)
+    has = np.isfinite(hi)
+    diff = np.zeros(E)
+    diff[has] = (hi[has] - lo[has]) / np.maximum(hi[has], floor)
+    area = np.asarray(tree.areas, dtype=np.float64)
+    score = np.where(diff > settings.contrast, area * diff / settings.contrast, 0.0)
+    vmax = _per_leaf(conf, corner_vis, E, np.maximum, np.int64(-1))
+    vmin = _per_leaf(conf, corner_vis, E, np.minimum, np.int64(np.iinfo(np.int64).max))
+    # A visibility change alone does not split: inside a wide penumbra every leaf sees a
+    # different part of the light, and the light there changes smoothly (contrast's business).
+    shadow = has & (vmax != vmin) & (diff > SHADOW_CONTRAST * settings.contrast)
+    score = np.maximum(score, np.where(shadow, area, 0.0))
+    touches = _per_leaf(conf, corner_alone.astype(np.int64), E, np.maximum, np.int64(0)) > 0
+    size = np.asarray(tree.sizes, dtype=np.float64)
+    contact = touches & (size > max(CONTACT_ELEMENT, 2.0 * settings.min_element))
+    score = np.maximum(score, np.where(contact, 0.5 * area, 0.0))
+    score[emitting_leaf] = 0.0
+    score[size < 2.0 * settings.min_element] = 0.0
+    return score, dict(contrast=int(np.count_nonzero(diff > settings.contrast)),
+                       shadow=int(np.count_nonzero(shadow)), contact=int(np.count_nonzero(contact)))
