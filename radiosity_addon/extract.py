@@ -53,7 +53,8 @@ class Part:
     uv_active, uv_render : int
         Index of the active and of the render UV map (-1 without UV maps).
     attributes : list of (name, domain, data_type, (N, k) array)
-        The evaluated mesh's other attributes on points, corners and faces (:func:`read_attributes`).
+        The evaluated mesh's other attributes on points, corners and faces
+        (:func:`read_attributes`).
     """
 
     object_name: str

@@ -25,6 +25,7 @@ import bpy
 import numpy as np
 
 from ..core import transfer
+from ..core.geometry import ragged
 from ..core.transfer import CORNER_INSET  # noqa: F401  (the tolerance of the corner mapping)
 from .extract import ATTRIBUTE_TYPES, read_mesh_layout, transform
 
@@ -360,7 +361,7 @@ def part_mesh(part, output, faces):
         user's mesh.
     """
     sizes = output.face_sizes[faces]
-    owner, local, starts = _ragged(sizes)
+    owner, local, starts = ragged(sizes)
     corners = output.face_starts[faces][owner] + local
     n_part = part.corner_stop - part.corner_start
     src = output.corner_sources[corners] - part.corner_start
@@ -419,13 +420,6 @@ def _carry(values, domain, eval_src, weights, part, parent, inverse, n_verts):
     out = np.empty((n_verts, per_corner.shape[1]), dtype=per_corner.dtype)
     out[inverse] = per_corner
     return out
-
-
-def _ragged(counts):
-    counts = np.asarray(counts, dtype=np.int64)
-    owner = np.repeat(np.arange(counts.size), counts)
-    starts = np.cumsum(counts) - counts
-    return owner, np.arange(owner.size) - starts[owner], starts
 
 
 def new_mesh(name, arrays, part, materials):

@@ -15,8 +15,9 @@ Three rooms: two 6 x 4 m rooms on the west side (separated by a 0.1 m thick wall
 and a 6 x 8 m gallery on the east, joined through two doorways in a 0.1 m thick wall; a window
 opening (no glass) in the gallery's south wall; six plinths in the gallery; one luminaire panel in
 each small room and four in the gallery (5 cm below the ceiling, emitting from both faces in
-Cycles). In the benchmark's copy, faces <= 0.13 m give ~25,000 faces: at the default 0.5 m patch size our engine needs one
-patch per face, i.e. well over 20,000 patches. Same materials and conventions as make_office.py.
+Cycles). In the benchmark's copy, faces <= 0.13 m give ~25,000 faces: at the default 0.5 m
+patch size our engine needs one patch per face, i.e. well over 20,000 patches. Same materials and
+conventions as make_office.py.
 """
 
 import sys

@@ -323,7 +323,8 @@ def uv_at(mesh, points, layer):
             a, b, c = co[cv[t]]
             w = np.linalg.lstsq(np.stack([b - a, c - a], axis=1), p - a, rcond=None)[0]
             bary = np.array([1 - w.sum(), w[0], w[1]])
-            if bary.min() > -1e-9 and np.linalg.norm(a + w[0] * (b - a) + w[1] * (c - a) - p) < 1e-6:
+            miss = np.linalg.norm(a + w[0] * (b - a) + w[1] * (c - a) - p)
+            if bary.min() > -1e-9 and miss < 1e-6:
                 out[i] = bary @ uv[t]
                 break
     return out

@@ -32,7 +32,8 @@ def test_fan_covers_each_polygon_once():
     pts = np.c_[radius * np.cos(angles), radius * np.sin(angles), np.zeros(angles.size)]
     tris = fan(starts, sizes)
     assert tris.shape == (int((sizes - 2).sum()), 3)
-    area = 0.5 * np.cross(pts[tris[:, 1]] - pts[tris[:, 0]], pts[tris[:, 2]] - pts[tris[:, 0]])[:, 2]
+    p0, p1, p2 = (pts[tris[:, k]] for k in range(3))
+    area = 0.5 * np.cross(p1 - p0, p2 - p0)[:, 2]
     owner = np.repeat(np.arange(sizes.size), sizes - 2)
     for f, (s, k) in enumerate(zip(starts, sizes)):
         xy = pts[s:s + k, :2]
