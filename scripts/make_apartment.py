@@ -54,14 +54,16 @@ def _wall(b, axis, at, lo, hi, H, doors, mat="wall", t=0.1):
             b.rect((s1, a1, 0), (-L, 0, 0), (0, 0, H), mat,
                    hole=(L - hole[1], L - hole[0], 0, hole[3]) if hole else None)      # +y side
     for d0, d1, dh in doors:   # reveals: jambs face into the doorway, head faces down
+        # (normal = u x v). The benchmark's copy in bench/scenes/ was made before this was
+        # put right (7 reveal faces there face into the wall); its figures stand for that file.
         if axis == "x":
-            b.rect((a0, d0, 0), (t, 0, 0), (0, 0, dh), mat)                            # +y
-            b.rect((a1, d1, 0), (-t, 0, 0), (0, 0, dh), mat)                           # -y
+            b.rect((a0, d0, 0), (0, 0, dh), (t, 0, 0), mat)                            # +y
+            b.rect((a1, d1, 0), (0, 0, dh), (-t, 0, 0), mat)                           # -y
             b.rect((a0, d0, dh), (0, d1 - d0, 0), (t, 0, 0), mat)                      # -z
         else:
-            b.rect((d0, a1, 0), (0, -t, 0), (0, 0, dh), mat)                           # +x
-            b.rect((d1, a0, 0), (0, t, 0), (0, 0, dh), mat)                            # -x
-            b.rect((d0, a0, dh), (d1 - d0, 0, 0), (0, t, 0), mat)                      # -z
+            b.rect((d0, a1, 0), (0, 0, dh), (0, -t, 0), mat)                           # +x
+            b.rect((d1, a0, 0), (0, 0, dh), (0, t, 0), mat)                            # -x
+            b.rect((d0, a0, dh), (0, t, 0), (d1 - d0, 0, 0), mat)                      # -z
 
 
 def build_apartment(face_size=0.13):
