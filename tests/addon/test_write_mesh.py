@@ -480,3 +480,20 @@ def test_mesh_bake_is_one_undo_step(package, monkeypatch):
     obj = bpy.data.objects["Plane"]
     assert write.is_baked(obj) and len(obj.data.polygons) == 32
     assert not obj.modifiers["Grid"].show_viewport
+
+
+def test_area_light_faces_in_the_output_are_left_out(package):
+    # An area light is a scene face of no object: output faces over it are not written anywhere,
+    # and the floor still gets exactly its own 2 x 2 faces.
+    light = bpy.data.lights.new("Panel", "AREA")
+    light.size = 1.0
+    light.energy = 100.0
+    lamp_obj = bpy.data.objects.new("Panel", light)
+    lamp_obj.location = (0.0, 0.0, 2.0)
+    bpy.context.scene.collection.objects.link(lamp_obj)
+    fv, ff = square(2.0)
+    floor = mesh_object("Floor", fv, ff, material("grey"))
+    ext, out = bake_fake()
+    assert ext.lights == 1 and len(ext.parts) == 1
+    assert out.face_parent.max() == 1                     # the light's face is in the output
+    assert len(floor.data.polygons) == 4
