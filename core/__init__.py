@@ -5,11 +5,12 @@ are re-exported here; see README.md for a runnable example and docs/design.md fo
 """
 
 from .errors import BakeCancelled, RadiosityError, SceneError, SettingsError
+from .outmesh import OutputMesh
 from .scene import Scene, make_scene, scene_from_polygons
 
 __all__ = [
     "BakeCancelled", "RadiosityError", "SceneError", "SettingsError",
-    "Scene", "make_scene", "scene_from_polygons",
+    "OutputMesh", "Scene", "make_scene", "scene_from_polygons",
 ]
 
 try:  # The pipeline modules are imported when present (they land module by module).

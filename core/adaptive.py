@@ -296,7 +296,7 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         leaf_scene = _leaf_scene(scene, tree, conf)
         alone = contact_points(tree.points, contacts) | contact_points(tree.points, outline)
         groups = corner_groups(leaf_scene, crease_angle=settings.crease_angle, alone=alone)
-        keys, vertex = _group_keys(leaf_scene, groups, alone)
+        keys, _ = _group_keys(leaf_scene, groups, alone)
         ids = cache.lookup(keys)
         new = np.flatnonzero(ids < 0)
         # Points next to no lit patch see no light: no hemicube.
@@ -343,7 +343,8 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         corner_vis[ok] = cache.vis[ids][groups.group[ok]]
         emitting_leaf = np.any(emission[np.asarray(tree.material)] > 0, axis=1)
         score, marked = per_leaf_scores(tree, conf, luminance(corner_value), corner_vis,
-                                alone[leaf_scene.corner_verts], emitting_leaf, floor, settings)
+                                        alone[leaf_scene.corner_verts], emitting_leaf, floor,
+                                        settings)
         step.update(marked)
         split = _split_within(tree, score, settings.vertex_budget) if score.any() else None
         if split is None:
