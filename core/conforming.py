@@ -21,7 +21,7 @@ FLAT_SINE = 1e-9
 PAIR_CHUNK = 1 << 20
 
 
-def clip_convex_rings(pos, count, normals):
+def clip_convex_rings(pos, count, normals, flat=None):
     """Triangulate convex polygons, some of whose vertices lie on straight edges, without new
     points and without zero-area triangles.
 
@@ -38,6 +38,11 @@ def clip_convex_rings(pos, count, normals):
         Vertices per ring (3..K).
     normals : (n, 3) float64
         Unit normal of each ring.
+    flat : (n, K) bool, optional
+        Vertices known to lie on the edge between their neighbours (hanging points). Given, the
+        flatness is tracked combinatorially (a clipped vertex's neighbours become corners), so
+        points off their line by input rounding (float32 coordinates) never form a sliver ear;
+        by default it comes from the turn at each vertex (``FLAT_SINE``).
 
     Returns
     -------
@@ -50,6 +55,8 @@ def clip_convex_rings(pos, count, normals):
     n, K = pos.shape[:2]
     count = np.asarray(count, dtype=np.int64)
     ring = np.broadcast_to(np.arange(K), (n, K)).copy()
+    known = flat is not None
+    flag = np.asarray(flat, dtype=bool).copy() if known else None
     c = count.copy()
     out_t, out_o = [], []
     active = np.flatnonzero(c >= 3)
@@ -71,9 +78,13 @@ def clip_convex_rings(pos, count, normals):
         tiny = np.finfo(float).tiny
         sine = np.einsum("ikj,ij->ik", np.cross(e1, e2), normals[act]) / np.maximum(l1 * l2, tiny)
         in_ring = j[None, :] < cc
-        strict = (sine > FLAT_SINE) & in_ring
-        flat = ~strict & in_ring
-        near_flat = np.take_along_axis(flat, ip, axis=1) | np.take_along_axis(flat, inx, axis=1)
+        if known:
+            strict = ~np.take_along_axis(flag[act], r, axis=1) & in_ring
+        else:
+            strict = (sine > FLAT_SINE) & in_ring
+        is_flat = ~strict & in_ring
+        near_flat = (np.take_along_axis(is_flat, ip, axis=1)
+                     | np.take_along_axis(is_flat, inx, axis=1))
         # Smallest angle of the ear (law of sines: proportional to the shortest side / area).
         area2 = np.abs(sine) * l1 * l2
         shape = area2 / np.maximum(np.maximum(np.maximum(l1, l2), l3) ** 2, tiny)
@@ -82,6 +93,10 @@ def clip_convex_rings(pos, count, normals):
         out_t.append(np.concatenate([np.take_along_axis(rp, pick, 1), np.take_along_axis(r, pick, 1),
                                      np.take_along_axis(rn, pick, 1)], axis=1))
         out_o.append(act)
+        if known:       # the clipped vertex's neighbours are corners of the rest
+            rows1 = act
+            flag[rows1, np.take_along_axis(rp, pick, 1)[:, 0]] = False
+            flag[rows1, np.take_along_axis(rn, pick, 1)[:, 0]] = False
         shift = np.minimum(j[None, :] + (j[None, :] >= pick), K - 1)
         ring[act] = np.take_along_axis(r, shift, axis=1)
         c[act] -= 1
@@ -95,35 +110,62 @@ def _build_templates():
     """Triangles per hanging pattern, as slots into (p0, p1, p2, p3, m01, m12, m23, m30).
 
     Code = pattern bits (1 << edge slot) + 16 for triangles (edge slot 2 of a triangle, p2 -> p3,
-    has zero length and never hangs). Built once by clipping the canonical square / triangle: the
-    combinatorics hold for every convex quad and every triangle (the same vertices are flat).
+    has zero length and never hangs). Built once by clipping a few canonical shapes (square,
+    oblongs, parallelograms; right, flat and tall triangles): with the hanging points flagged the
+    clipping is combinatorial, so every variant is valid for every convex quad / triangle, and
+    the variants differ only in which diagonals they take (chosen per element by shape).
     """
-    square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=np.float64)
-    triangle = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 1, 0]], dtype=np.float64)
-    templates = {}
-    for is_tri, shape in ((False, square), (True, triangle)):
+    quads = [[[0, 0], [1, 0], [1, 1], [0, 1]], [[0, 0], [2, 0], [2, 1], [0, 1]],
+             [[0, 0], [1, 0], [1, 2], [0, 2]], [[0, 0], [1, 0], [1.8, 1], [0.8, 1]],
+             [[0, 0], [1, 0], [0.2, 1], [-0.8, 1]]]
+    tris = [[[0, 0], [1, 0], [0, 1]], [[0, 0], [1, 0], [0.5, 0.25]], [[0, 0], [1, 0], [1.2, 1.5]],
+            [[0, 0], [1, 0], [-0.3, 1.5]]]
+    variants = {}
+    for is_tri, shapes in ((False, quads), (True, tris)):
         edges = (0, 1, 3) if is_tri else (0, 1, 2, 3)
-        for pattern in range(16):
-            if any(pattern >> e & 1 for e in range(4) if e not in edges) or pattern == 0:
-                continue
-            slots, pts = [], []
-            for e in edges:
-                slots.append(e if not (is_tri and e == 3) else 2)
-                pts.append(shape[slots[-1]])
-                if pattern >> e & 1:
-                    slots.append(4 + e)
-                    pts.append((shape[e] + shape[(e + 1) % 4]) / 2)
-            tris, _ = clip_convex_rings(np.array(pts)[None], np.array([len(pts)]),
-                                        np.array([[0.0, 0.0, 1.0]]))
-            templates[pattern + 16 * is_tri] = np.array(slots)[tris]
-    return templates
+        for shape in shapes:
+            shape = np.column_stack([np.array(shape, float), np.zeros(len(shape))])
+            if is_tri:
+                shape = np.vstack([shape, shape[2:]])
+            for pattern in range(1, 16):
+                if any(pattern >> e & 1 for e in range(4) if e not in edges):
+                    continue
+                slots, pts, flat = [], [], []
+                for e in edges:
+                    slots.append(e if not (is_tri and e == 3) else 2)
+                    pts.append(shape[slots[-1]])
+                    flat.append(False)
+                    if pattern >> e & 1:
+                        slots.append(4 + e)
+                        pts.append((shape[e] + shape[(e + 1) % 4]) / 2)
+                        flat.append(True)
+                t, _ = clip_convex_rings(np.array(pts)[None], np.array([len(pts)]),
+                                         np.array([[0.0, 0.0, 1.0]]), np.array([flat]))
+                tmpl = np.array(slots)[t]
+                known = variants.setdefault(pattern + 16 * is_tri, [])
+                canon = sorted(tuple(np.roll(tr, -int(np.argmin(tr)))) for tr in tmpl.tolist())
+                if all(canon != sorted(tuple(np.roll(tr, -int(np.argmin(tr)))) for tr in k.tolist())
+                       for k in known):
+                    known.append(tmpl)
+    return variants
 
 
-#: code -> (t, 3) slots into (p0, p1, p2, p3, m01, m12, m23, m30); see _build_templates.
-TEMPLATES = _build_templates()
+#: code -> list of (t, 3) slot arrays into (p0, p1, p2, p3, m01, m12, m23, m30), the first from
+#: the square / right triangle; see _build_templates.
+TEMPLATE_VARIANTS = _build_templates()
+#: code -> the first variant.
+TEMPLATES = {code: v[0] for code, v in TEMPLATE_VARIANTS.items()}
 
 
-def triangulate_hanging(leaves, is_tri, mids):
+def _quality(tri_pts):
+    """(..., ) smallest triangle quality (2 area / longest edge^2) over axis -3 of (..., t, 3, 3)."""
+    e = np.roll(tri_pts, -1, axis=-2) - tri_pts
+    area2 = np.linalg.norm(np.cross(e[..., 0, :], -e[..., 2, :]), axis=-1)
+    longest = np.max(np.einsum("...ij,...ij->...i", e, e), axis=-1)
+    return (area2 / np.maximum(longest, np.finfo(float).tiny)).min(axis=-1)
+
+
+def triangulate_hanging(leaves, is_tri, mids, points=None):
     """Conforming polygons of leaves whose edges carry their neighbours' midpoints.
 
     Parameters
@@ -133,6 +175,9 @@ def triangulate_hanging(leaves, is_tri, mids):
     is_tri : (E,) bool
     mids : (E, 4) int64
         Point id of the midpoint hanging on each edge slot, -1 where none.
+    points : (V, 3) float64, optional
+        Given, each leaf takes the variant of its template whose worst triangle is best shaped;
+        otherwise the first variant.
 
     Returns
     -------
@@ -151,9 +196,14 @@ def triangulate_hanging(leaves, is_tri, mids):
     local = [np.zeros(leaf[0].size, np.int64)]
     for c in np.unique(code[~plain]):          # one pass per hanging pattern (at most 22)
         sel = np.flatnonzero(code == c)
-        tmpl = TEMPLATES[int(c)]
-        tri = table[sel][:, tmpl]               # (n, t, 3)
-        t = tmpl.shape[0]
+        options = TEMPLATE_VARIANTS[int(c)] if points is not None else TEMPLATES[int(c)][None]
+        t = options[0].shape[0]                 # every variant of a pattern has as many triangles
+        tri = table[sel][:, np.asarray(options)]                         # (n, variants, t, 3)
+        if len(options) > 1:
+            best = np.argmax(_quality(points[tri]), axis=1)
+            tri = tri[np.arange(sel.size), best]
+        else:
+            tri = tri[:, 0]
         poly.append(np.concatenate([tri, tri[:, :, 2:]], axis=2).reshape(-1, 4))
         size.append(np.full(sel.size * t, 3, np.int64))
         leaf.append(np.repeat(sel, t))

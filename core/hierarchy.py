@@ -15,6 +15,27 @@ Pure geometry; which leaves to split (by light contrast) is the driver's busines
   at most one midpoint hangs on any edge and the templates of :mod:`core.conforming` suffice.
 
 Sizes: V points, E leaves, P patches.
+
+Examples
+--------
+Two 1 m squares (floor and emitter) in 0.5 m patches; split one floor patch: its two
+neighbours then carry a hanging midpoint each and are triangulated in the output.
+
+>>> import numpy as np
+>>> from core import samples
+>>> from core.patches import make_patches
+>>> scene = samples.opposed_squares()
+>>> tree = ElementTree.from_patches(scene, make_patches(scene, 0.5))
+>>> tree.n_leaves
+8
+>>> mask = np.zeros(tree.n_leaves, dtype=bool)
+>>> mask[0] = True
+>>> tree, parent = tree.split(mask)
+>>> tree.n_leaves, int(tree.hanging().sum())
+(11, 2)
+>>> polys = tree.conforming()
+>>> sorted(set(polys["face_sizes"].tolist()))
+[3, 4]
 """
 
 import numpy as np
@@ -30,8 +51,13 @@ from .patches import (_QUAD_CHILDREN, _TRI_CHILDREN, Patches, _assemble, _connec
 WELD_REL = 1e-8
 
 #: A point lies inside an element edge (a T-junction) when its distance from the edge's line is
-#: at most this times the edge length and it is at least this far (relative) from both ends.
-ON_EDGE_REL = 1e-8
+#: at most this times the edge length (or FLOAT32_SLACK times the coordinates' magnitude) and
+#: it is at least this far (relative) from both ends.
+ON_EDGE_REL = 1e-6
+
+#: Blender hands over float32 coordinates: a vertex modelled on an edge is off its line by up to
+#: a few float32 roundings of the coordinates.
+FLOAT32_SLACK = 4.0 * float(np.finfo(np.float32).eps)
 
 #: Edge keys are lo * KEY_BASE + hi (point ids below 2**31).
 KEY_BASE = np.int64(1) << np.int64(31)
@@ -143,7 +169,8 @@ class ElementTree:
         face = np.asarray(patches.face, dtype=np.int64)
         obj = np.asarray(scene.face_objects, dtype=np.int64)[face]
         sizes = np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2).max(axis=1)
-        points, pid = _weld(corners.reshape(-1, 3), np.repeat(obj, 4), np.repeat(sizes, 4))
+        points, point_obj, pid = _weld(corners.reshape(-1, 3), np.repeat(obj, 4),
+                                       np.repeat(sizes, 4))
         pid = _canonical_corners(pid.reshape(P, 4))
         # Scene corners at points: (point, face) -> (scene vertex, scene corner).
         ip, islot = patches.incidence_patch, patches.incidence_slot
@@ -155,7 +182,8 @@ class ElementTree:
         # Patches that welding left with fewer than three corners have no area: no leaf.
         sel = np.flatnonzero((pid[:, 0] != pid[:, 1]) & (pid[:, 1] != pid[:, 2])
                              & (pid[:, 2] != pid[:, 0]))
-        leaves, leaf_patch = _conform_level0(points, pid[sel], np.asarray(patches.normals)[sel])
+        leaves, leaf_patch = _conform_level0(points, point_obj, pid[sel],
+                                             np.asarray(patches.normals)[sel])
         leaf_patch = sel[leaf_patch]
         face_materials = _material_table(patches)
         leaf_face = face[leaf_patch]
@@ -271,7 +299,8 @@ class ElementTree:
 
         Leaves without hanging midpoints are kept (quads stay quads); the others are
         triangulated by the template of their hanging pattern, over their corners and the
-        hanging midpoints only.
+        hanging midpoints only (of the template's variants, the one with the best-shaped worst
+        triangle for that leaf).
 
         Returns
         -------
@@ -279,7 +308,7 @@ class ElementTree:
             corner_verts (C,), face_starts (F,), face_sizes (F,) in {3, 4}, face_parent (F,)
             scene face, face_leaf (F,) leaf; all int64, faces in leaf order.
         """
-        out = triangulate_hanging(self.leaves, self.is_triangle, self._hanging_mids())
+        out = triangulate_hanging(self.leaves, self.is_triangle, self._hanging_mids(), self.points)
         out["face_parent"] = self.leaf_face[out["face_leaf"]]
         return out
 
@@ -307,7 +336,7 @@ class ElementTree:
 def _weld(xyz, obj, size):
     """Merge points of one object closer than WELD_REL x their local size.
 
-    Returns unique points (V, 3) and the point id of every input point. Exact duplicates first;
+    Returns unique points (V, 3), their objects (V,) and the point id of every input point. Exact duplicates first;
     near ones by hashing on 8 half-shifted grids of twice the largest tolerance (two points
     within half a cell share a cell in one of them), joined by connected components.
     """
@@ -316,7 +345,7 @@ def _weld(xyz, obj, size):
     inv = inv.reshape(-1)
     n = uniq.shape[0]
     if n == 0:
-        return np.zeros((0, 3)), np.zeros(0, np.int64)
+        return np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64)
     tol = np.full(n, np.inf)
     np.minimum.at(tol, inv, WELD_REL * size)
     tol = np.where(np.isfinite(tol), tol, 0.0)
@@ -338,7 +367,61 @@ def _weld(xyz, obj, size):
     else:
         label = np.arange(n)
     rep, merged = np.unique(label, return_inverse=True)
-    return pts[rep].copy(), merged.reshape(-1)[inv].astype(np.int64)
+    return pts[rep].copy(), uobj[rep], merged.reshape(-1)[inv].astype(np.int64)
+
+
+#: Spatial hash of :func:`_points_on_edges`: at most this many (edge, cell) pairs; beyond it
+#: the cells grow (long edges among short ones).
+MAX_EDGE_CELLS = 1 << 24
+
+
+def _points_on_edges(points, point_obj, a, b, edge_obj):
+    """Points of the edge's object strictly inside edges a -> b (V points, n edges).
+
+    Cells of about the median edge length, keyed with the object; each edge visits the cells of
+    its bounding box (grown by the tolerance) and tests the points there exactly.
+
+    Returns edge (m,) int64, point (m,) int64, parameter t in (0, 1) along a -> b (m,) float64.
+    """
+    empty = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+    if a.size == 0:
+        return empty
+    A, B = points[a], points[b]
+    d = B - A
+    L = np.linalg.norm(d, axis=1)
+    tol = np.maximum(ON_EDGE_REL * L, FLOAT32_SLACK * np.maximum(np.abs(A).max(1), np.abs(B).max(1)))
+    lo = np.minimum(A, B) - tol[:, None]
+    hi = np.maximum(A, B) + tol[:, None]
+    base = points.min(axis=0)
+    extent = float((points.max(axis=0) - base).max())
+    cell = max(float(np.median(L)), extent / 2.0 ** 16, np.finfo(float).tiny)
+    while True:
+        n = np.int64(np.floor(extent / cell)) + 2
+        c0 = np.clip(np.floor((lo - base) / cell), 0, n - 1).astype(np.int64)
+        c1 = np.clip(np.floor((hi - base) / cell), 0, n - 1).astype(np.int64)
+        span = c1 - c0 + 1
+        count = span.prod(axis=1)
+        if count.sum() <= MAX_EDGE_CELLS:
+            break
+        cell *= 2.0
+    pc = np.clip(np.floor((points - base) / cell), 0, n - 1).astype(np.int64)
+    pkey = ((point_obj * n + pc[:, 0]) * n + pc[:, 1]) * n + pc[:, 2]
+    order = np.argsort(pkey, kind="stable")
+    sk = pkey[order]
+    e, j, _ = ragged(count)
+    sy, sz = span[e, 1], span[e, 2]
+    key = ((edge_obj[e] * n + c0[e, 0] + j // (sy * sz)) * n + c0[e, 1] + (j // sz) % sy) * n \
+        + c0[e, 2] + j % sz
+    first = np.searchsorted(sk, key, side="left")
+    pe, pj, _ = ragged(np.searchsorted(sk, key, side="right") - first)
+    edge, q = e[pe], order[first[pe] + pj]
+    X, D, Q = A[edge], d[edge], points[q] - A[edge]
+    L2 = np.maximum(L[edge] ** 2, np.finfo(float).tiny)
+    t = np.einsum("ij,ij->i", Q, D) / L2
+    off = np.linalg.norm(np.cross(D, Q), axis=1) / np.sqrt(L2)
+    ok = ((t > ON_EDGE_REL) & (t < 1 - ON_EDGE_REL) & (off <= tol[edge])
+          & (q != a[edge]) & (q != b[edge]))
+    return edge[ok], q[ok], t[ok]
 
 
 def _canonical_corners(pid):
@@ -353,12 +436,13 @@ def _canonical_corners(pid):
     return np.where(np.arange(4)[None, :] < n[:, None], kept, last)
 
 
-def _conform_level0(points, pid, normals):
+def _conform_level0(points, point_obj, pid, normals):
     """Re-triangulate patches with another patch's point inside one of their edges.
 
-    A T-point on edge (a, b) of a patch is found from the edges of the other side, which share
-    a or b and run along (a, b); each round inserts one point per boundary edge into the rings
-    (vertex entries ordered by slot + edge parameter) until none is found.
+    Every point of the same object lying strictly inside a patch edge (within ON_EDGE_REL of
+    its length, or float32 rounding of the coordinates) is found by a spatial hash
+    (:func:`_points_on_edges`) and inserted into the patch's boundary ring, ordered by slot +
+    edge parameter; a point inside a sub-edge lies inside the whole edge, so one pass finds all.
 
     Returns leaves (E, 4) int64 and the patch of each leaf.
     """
@@ -368,59 +452,19 @@ def _conform_level0(points, pid, normals):
     slots = np.broadcast_to(np.arange(4), (P, 4))
     use = slots < k[:, None]
     e_leaf = np.broadcast_to(np.arange(P)[:, None], (P, 4))[use]
-    e_pos = slots[use].astype(np.float64)
-    e_pt = pid[use]
-    extra = False
-    active = None                   # points where a new pair can appear (None: all)
-    while True:                     # rounds: each inserts a point into every edge with one
-        order = np.lexsort((e_pos, e_leaf))
-        e_leaf, e_pos, e_pt = e_leaf[order], e_pos[order], e_pt[order]
-        start = np.r_[True, e_leaf[1:] != e_leaf[:-1]]
-        gstart = np.maximum.accumulate(np.where(start, np.arange(e_leaf.size), 0))
-        last = np.r_[e_leaf[1:] != e_leaf[:-1], True]
-        nxt = np.where(last, gstart, np.arange(e_leaf.size) + 1)
-        a, b = e_pt, e_pt[nxt]
-        n_e = a.size
-        # Entries (vertex x, far end y, edge) for both ends of every boundary edge.
-        x = np.concatenate([a, b])
-        y = np.concatenate([b, a])
-        # Only edges created last round (ends in ``active``) can form a new pair; a zip of
-        # misaligned points along a long shared line advances one point per round.
-        ent = np.arange(x.size) if active is None else np.flatnonzero(np.isin(x, active))
-        i, j = pairs_by_key(x[ent])
-        i, j = ent[i], ent[j]
-        keep = y[i] != y[j]
-        i, j = i[keep], j[keep]
-        X, Y, Q = points[x[i]], points[y[i]], points[y[j]]
-        d = Y - X
-        L2 = np.einsum("ij,ij->i", d, d)
-        t = np.einsum("ij,ij->i", Q - X, d) / np.maximum(L2, np.finfo(float).tiny)
-        off = np.linalg.norm(np.cross(d, Q - X), axis=1) / np.maximum(np.sqrt(L2), np.finfo(float).tiny)
-        inside = (t > ON_EDGE_REL) & (t < 1 - ON_EDGE_REL) & (off <= ON_EDGE_REL * np.sqrt(L2))
-        edge = (i % n_e)[inside]
-        q = y[j][inside]
-        if edge.size == 0:
-            break
-        extra = True
-        edge, first = np.unique(edge, return_index=True)
-        q = q[first]
-        active = np.unique(np.concatenate([a[edge], b[edge], q]))
-        # Parameter along the patch's original edge slot s (from corner s to corner s + 1).
-        leaf = e_leaf[edge]
-        s = np.floor(e_pos[edge]).astype(np.int64)
-        c0 = points[pid[leaf, s]]
-        c1 = points[pid[leaf, (s + 1) % k[leaf]]]
-        dd = c1 - c0
-        tt = np.einsum("ij,ij->i", points[q] - c0, dd) / np.einsum("ij,ij->i", dd, dd)
-        e_leaf = np.concatenate([e_leaf, leaf])
-        e_pos = np.concatenate([e_pos, s + tt])
-        e_pt = np.concatenate([e_pt, q])
-    if not extra:
+    e_slot = slots[use]
+    a = pid[use]
+    b = pid[e_leaf, (e_slot + 1) % k[e_leaf]]
+    edge, q, t = _points_on_edges(points, point_obj, a, b, point_obj[a])
+    if edge.size == 0:
         return pid.copy(), np.arange(P, dtype=np.int64)
+    e_pos = np.concatenate([e_slot.astype(np.float64), e_slot[edge] + t])
+    e_pt = np.concatenate([a, q])
+    e_leaf = np.concatenate([e_leaf, e_leaf[edge]])
     count = np.bincount(e_leaf, minlength=P)
     fix = np.flatnonzero(count > k)
     order = np.lexsort((e_pos, e_leaf))
-    e_leaf, e_pt = e_leaf[order], e_pt[order]
+    e_leaf, e_pt, e_pos = e_leaf[order], e_pt[order], e_pos[order]
     K = int(count.max())
     start = np.cumsum(count) - count
     sel = np.isin(e_leaf, fix)
@@ -429,11 +473,11 @@ def _conform_level0(points, pid, normals):
     ring = np.zeros((fix.size, K), np.int64)
     ring[row, col] = e_pt[sel]
     ring = np.where(np.arange(K)[None, :] < count[fix][:, None], ring, ring[:, :1])
-    tris, owner = clip_convex_rings(points[ring], count[fix], normals[fix])
+    flat = np.zeros((fix.size, K), bool)
+    flat[row, col] = e_pos[sel] != np.floor(e_pos[sel])       # inserted points, not corners
+    tris, owner = clip_convex_rings(points[ring], count[fix], normals[fix], flat)
     tri_pts = np.take_along_axis(ring[owner], tris, axis=1)
     # Leaves: unchanged patches and the triangles of the fixed ones, in patch order.
-    n_child = np.ones(P, np.int64)
-    n_child[fix] = count[fix] - 2
     keep = np.ones(P, bool)
     keep[fix] = False
     leaf_patch = np.concatenate([np.flatnonzero(keep), fix[owner]])
