@@ -40,6 +40,21 @@ class Part:
         The evaluated mesh's layout (its own indices).
     matrix_world : (4, 4) float64
         Object to world, unit scale included.
+    face_start : int
+        Scene index of the part's first face; its faces are the evaluated faces in order.
+    object_vertices : (V_eval, 3) float64
+        Evaluated vertices in object space (what a baked mesh stores).
+    face_materials : (F_eval,) int64
+        Material slot index of every evaluated face (the object's own slots).
+    face_smooth : (F_eval,) bool
+        Smooth shading of every evaluated face.
+    uv_maps : list of (str, (C_eval, 2) float64)
+        Every UV map of the evaluated mesh, by name, in the mesh's order.
+    uv_active, uv_render : int
+        Index of the active and of the render UV map (-1 without UV maps).
+    attributes : list of (name, domain, data_type, (N, k) array)
+        The evaluated mesh's other attributes on points, corners and faces
+        (:func:`read_attributes`).
     """
 
     object_name: str
@@ -51,6 +66,14 @@ class Part:
     face_starts: np.ndarray
     face_sizes: np.ndarray
     matrix_world: np.ndarray
+    face_start: int = 0
+    object_vertices: np.ndarray = None
+    face_materials: np.ndarray = None
+    face_smooth: np.ndarray = None
+    uv_maps: list = field(default_factory=list)
+    uv_active: int = -1
+    uv_render: int = -1
+    attributes: list = field(default_factory=list)
 
 
 @dataclass
@@ -89,6 +112,63 @@ def read_mesh_layout(mesh):
             sizes.astype(np.int64), mats.astype(np.int64))
 
 
+def read_face_smooth(mesh):
+    """(F,) bool: smooth shading of every face."""
+    smooth = np.empty(len(mesh.polygons), dtype=bool)
+    mesh.polygons.foreach_get("use_smooth", smooth)
+    return smooth
+
+
+def read_uv_maps(mesh):
+    """Every UV map as (name, (C, 2) float64), and the active and render map indices."""
+    maps, active, render = [], -1, -1
+    for i, layer in enumerate(mesh.uv_layers):
+        buf = np.empty(len(mesh.loops) * 2, dtype=np.float32)
+        layer.uv.foreach_get("vector", buf)
+        maps.append((layer.name, buf.reshape(-1, 2).astype(np.float64)))
+        if layer.active:
+            active = i
+        if layer.active_render:
+            render = i
+    return maps, active, render
+
+
+#: Attribute data types carried onto a baked mesh: foreach property, width, NumPy dtype.
+ATTRIBUTE_TYPES = {"FLOAT": ("value", 1, np.float32), "FLOAT2": ("vector", 2, np.float32),
+                   "FLOAT_VECTOR": ("vector", 3, np.float32),
+                   "FLOAT_COLOR": ("color", 4, np.float32), "BYTE_COLOR": ("color", 4, np.float32),
+                   "INT": ("value", 1, np.int32), "INT8": ("value", 1, np.int32),
+                   "BOOLEAN": ("value", 1, bool)}
+
+#: Attributes a baked mesh gets otherwise (geometry, UV maps, material, shading) or never keeps.
+OWN_ATTRIBUTES = {"position", "material_index", "sharp_face", "Radiosity"}
+
+
+def read_attributes(mesh):
+    """The user's attributes on points, corners and faces, as arrays.
+
+    Internal (``.name``), geometry, UV-map, material-index and shading attributes are left out
+    (the baked mesh has its own), as are edge attributes and types not in
+    :data:`ATTRIBUTE_TYPES`.
+
+    Returns
+    -------
+    list of (name, domain, data_type, (N, k) array)
+    """
+    skip = OWN_ATTRIBUTES | {layer.name for layer in mesh.uv_layers}
+    out = []
+    for attr in mesh.attributes:
+        kind = ATTRIBUTE_TYPES.get(attr.data_type)
+        if (kind is None or attr.domain not in ("POINT", "CORNER", "FACE")
+                or attr.name.startswith(".") or attr.name in skip):
+            continue
+        prop, width, dtype = kind
+        buf = np.empty(len(attr.data) * width, dtype=dtype)
+        attr.data.foreach_get(prop, buf)
+        out.append((attr.name, attr.domain, attr.data_type, buf.reshape(-1, width)))
+    return out
+
+
 def transform(points, matrix):
     """Apply a (4, 4) affine matrix to (N, 3) points."""
     return points @ matrix[:3, :3].T + matrix[:3, 3]
@@ -123,6 +203,9 @@ def _is_visible(inst, view_layer, selected_only):
 def extract(depsgraph, *, selected_only=False):
     """Read the evaluated scene into the core's arrays.
 
+    Objects that show a baked mesh are read with their original mesh and modifiers
+    (``write.originals_for_reading``), so a bake always starts from the user's geometry.
+
     Parameters
     ----------
     depsgraph : bpy.types.Depsgraph
@@ -136,6 +219,13 @@ def extract(depsgraph, *, selected_only=False):
     Extraction
         ``arrays`` holds the keyword arguments of ``core.scene.make_scene``.
     """
+    from .write import originals_for_reading   # write imports this module
+
+    with originals_for_reading(depsgraph.scene, depsgraph):
+        return _extract(depsgraph, selected_only)
+
+
+def _extract(depsgraph, selected_only):
     scene = depsgraph.scene_eval
     view_layer = depsgraph.view_layer
     scale = float(scene.unit_settings.scale_length) or 1.0
@@ -190,6 +280,10 @@ def extract(depsgraph, *, selected_only=False):
         try:
             v, cv, fs, fz, fm = read_mesh_layout(mesh)
             slots = [s.material for s in obj.material_slots]
+            if not inst.is_instance and fs.size:
+                smooth = read_face_smooth(mesh)
+                uv_maps, uv_active, uv_render = read_uv_maps(mesh)
+                attributes = read_attributes(mesh)
         finally:
             obj.to_mesh_clear()
         if fs.size == 0:
@@ -212,7 +306,10 @@ def extract(depsgraph, *, selected_only=False):
             out.instances += 1
         else:
             out.parts.append(Part(obj.original.name, nc, nc + cv.size, perm, v_world, cv, fs, fz,
-                                  matrix))
+                                  matrix, face_start=sum(x.size for x in starts),
+                                  object_vertices=v, face_materials=fm, face_smooth=smooth,
+                                  uv_maps=uv_maps, uv_active=uv_active, uv_render=uv_render,
+                                  attributes=attributes))
         add_faces(v_world, cv[perm], fs, fz, fm_global, obj_index)
 
     if no_material:

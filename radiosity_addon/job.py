@@ -19,7 +19,7 @@ from ..core.errors import BakeCancelled, RadiosityError
 from ..core.settings import EXPOSED, as_dict
 from .extract import extract
 from .props import OPTIONS, from_blender
-from .write import WriteError, check_writable, show_in_viewports, write_colours
+from .write import WriteError, check_writable, show_in_viewports, write_colours, write_mesh
 
 #: Bake options that come from the panel / the batch command line and go to core.BakeSettings:
 #: the exposed rows of the core's settings table.
@@ -92,7 +92,7 @@ def prepare(context, options):
     objects = context.scene.objects
     try:
         check_writable([objects[p.object_name] for p in ext.parts],
-                       options["make_single_user"])
+                       options["make_single_user"], mesh_output=settings.output == "mesh")
     except WriteError as exc:
         raise BakeError(str(exc)) from exc
     return BakeInput(scene, settings, ext, context.scene.name, options["make_single_user"],
@@ -132,15 +132,28 @@ def _jsonable(value):
 
 
 def apply(context, bake_input, result):
-    """Write the result (main thread) and store the summary; returns the report dict."""
+    """Write the result (main thread) and store the summary; returns the report dict.
+
+    The core's radiosity mesh (``result.output``) becomes each object's baked mesh
+    (``write.write_mesh``); without one ("Existing Vertices"), the colours go onto the user's own
+    corners (``write.write_colours``).
+    """
     t0 = time.perf_counter()
     scene = context.scene
+    objects = {o.name: o for o in scene.objects}
+    output = getattr(result, "output", None)
     try:
-        write_colours({o.name: o for o in scene.objects}, bake_input.extraction.parts,
-                      result.corner_colours, make_single_user=bake_input.make_single_user)
+        if output is not None:
+            written = write_mesh(objects, bake_input.extraction.parts, output)
+        else:
+            write_colours(objects, bake_input.extraction.parts, result.corner_colours,
+                          make_single_user=bake_input.make_single_user)
+            written = None
     except (WriteError, KeyError) as exc:
         raise BakeError(f"Could not write the result: {exc}") from exc
     report = make_report(bake_input, result, time.perf_counter() - t0)
+    if written is not None:
+        report["output_objects"] = written
     props = getattr(scene, "radiosity", None)
     if props is not None:
         props.last_report = json.dumps(report)

@@ -6,7 +6,7 @@ import bpy
 
 from ..core.errors import BakeCancelled
 from .job import BakeError, BakeJob, apply, bake_now, options_from_props, prepare
-from .write import clear_attribute
+from .write import clear_bake
 
 #: Seconds between modal timer ticks: progress refresh and the latency of Esc (the worker itself
 #: polls the cancel flag every core POLL_INTERVAL = 0.2 s, so a cancel lands within ~0.3 s).
@@ -177,8 +177,7 @@ class RADIOSITY_OT_clear(bpy.types.Operator):
         objs = [o for o in context.scene.objects if o.type == "MESH"]
         if props.selected_only:
             objs = [o for o in objs if o.select_get()]
-        meshes = {o.data for o in objs if o.data.library is None}
-        removed = sum(clear_attribute(m) for m in meshes)
+        removed = clear_bake(objs)
         props.last_report = ""
         self.report({"INFO"}, f"Radiosity cleared from {removed} mesh(es)")
         return {"FINISHED"}

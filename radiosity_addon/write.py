@@ -1,73 +1,51 @@
-"""Bake result -> the ``Radiosity`` colour attribute of each original mesh, and the viewport.
+"""Bake result -> Blender data: each object's baked mesh, or colours on the user's own corners.
 
-Corner colours are computed on the evaluated geometry (what the user sees). When modifiers keep
-the topology, evaluated corners are the original corners one for one. When they change it
-(subdivision, array, mirror, ...), every original corner is given the baked lighting of the
-evaluated surface where that corner lies: a point just inside the corner's face, pushed along the
-face normal onto the evaluated surface by a ray (core.raycast), and interpolated barycentrically
-from the hit triangle's corner colours. Corners whose ray finds no compatible surface take the
-colour of the nearest evaluated corner.
+Two outputs (``job.apply`` picks one):
+
+* **Mesh** (:func:`write_mesh`, the default once the core produces ``BakeResult.output``): each
+  baked object's mesh data is swapped for a new mesh holding the radiosity mesh
+  (``core.outmesh.OutputMesh``) over that object's faces, with material indices, smooth/flat
+  shading, every UV map and the ``Radiosity`` colours. The object keeps its identity (name,
+  transform, parent, collections, material slots, custom properties, animation): only
+  ``obj.data`` changes. The original mesh is kept with a fake user and remembered on the object
+  (custom properties :data:`PROP_ORIGINAL`, :data:`PROP_FAKE_USER`); the modifiers applied into
+  the baked mesh (those shown in the viewport) are switched off in viewport and render, their
+  flags remembered (:data:`PROP_MODIFIERS`). :func:`clear_bake` restores all of it exactly.
+  Extraction always reads the original (:func:`originals_for_reading`), so a re-bake starts from
+  the user's mesh and modifiers, and a failed or cancelled bake leaves the scene as it was.
+* **Existing Vertices** (:func:`write_colours`): the colours go onto the original mesh's corners.
+  Corner colours are computed on the evaluated geometry (what the user sees); when modifiers
+  change the topology, every original corner takes the baked lighting of the evaluated surface
+  where that corner lies (``core.transfer.project_corners``).
 """
 
+from contextlib import contextmanager
+
+import bpy
 import numpy as np
 
-from ..core.raycast import build_bvh, closest_hit
-from .extract import read_mesh_layout, transform
+from ..core import transfer
+from ..core.geometry import ragged
+from ..core.transfer import CORNER_INSET  # noqa: F401  (the tolerance of the corner mapping)
+from .extract import ATTRIBUTE_TYPES, read_mesh_layout, transform
 
 #: Name of the colour attribute the bake writes (and the only one it touches or clears).
 ATTRIBUTE = "Radiosity"
 
-#: Sample points sit this fraction of the way from a corner's vertex to its face's centroid, so the
-#: sample falls inside that face (not on an edge shared with a creased neighbour) while staying at
-#: the vertex for all practical purposes.
-CORNER_INSET = 1e-3
-
-#: Where the evaluated surface has shrunk away from a corner (Catmull-Clark rounds a cube's corners
-#: off), the sample moves this far towards the face's centroid and tries again: the nearest part of
-#: the same face that survived the modifier.
-RETRY_INSETS = (0.25, 0.5)
-
-#: An evaluated triangle may stand for an original face only if their normals are within ~75
-#: degrees (cosine above this): subdivision tilts faces near corners, but never flips them.
-NORMAL_AGREEMENT = 0.25
-
-#: Evaluated corners per chunk of the nearest-corner fallback (bounds memory at ~8 MB per 1000).
-NEAREST_CHUNK = 256
+#: Object custom property: the original mesh (an ID pointer) while the object shows a baked mesh.
+PROP_ORIGINAL = "radiosity_original"
+#: Object custom property: the original mesh's fake-user flag before the bake (0 or 1).
+PROP_FAKE_USER = "radiosity_original_fake_user"
+#: Object custom property: {modifier name: [show_viewport, show_render]} before the bake.
+PROP_MODIFIERS = "radiosity_modifiers"
+#: Custom property on a baked mesh (marks it as ours: Clear Bake may delete it).
+PROP_BAKED = "radiosity_baked"
+#: Suffix of a baked mesh's name.
+BAKED_SUFFIX = ".radiosity"
 
 
 class WriteError(RuntimeError):
-    """Writing the result is impossible (shared mesh data, linked data, name clash)."""
-
-
-def _newell(points, corner_verts, face_starts, face_sizes):
-    """Unnormalised Newell normals (F, 3) and centroids (F, 3) of polygons."""
-    face_of = np.repeat(np.arange(face_starts.size), face_sizes)
-    nxt = np.arange(corner_verts.size) + 1
-    ends = face_starts + face_sizes
-    nxt[ends - 1] = face_starts
-    a = points[corner_verts]
-    b = points[corner_verts[nxt]]
-    cross = np.stack([(a[:, 1] - b[:, 1]) * (a[:, 2] + b[:, 2]),
-                      (a[:, 2] - b[:, 2]) * (a[:, 0] + b[:, 0]),
-                      (a[:, 0] - b[:, 0]) * (a[:, 1] + b[:, 1])], axis=1)
-    normals = np.zeros((face_starts.size, 3))
-    np.add.at(normals, face_of, cross)
-    centroids = np.zeros((face_starts.size, 3))
-    np.add.at(centroids, face_of, a)
-    return normals, centroids / face_sizes[:, None]
-
-
-def _unit(v):
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return np.divide(v, n, out=np.zeros_like(v), where=n > 0)
-
-
-def _fan(face_starts, face_sizes):
-    """Fan triangulation: (T, 3) corner indices."""
-    ntri = face_sizes - 2
-    first = np.repeat(face_starts, ntri)
-    local = np.arange(ntri.sum()) - np.repeat(np.cumsum(ntri) - ntri, ntri)
-    return np.stack([first, first + local + 1, first + local + 2], axis=1)
+    """Writing the result is impossible (linked data, name clash, a result that does not fit)."""
 
 
 def map_to_original(part, eval_colours, orig_layout):
@@ -92,94 +70,177 @@ def map_to_original(part, eval_colours, orig_layout):
             and np.array_equal(fz, part.face_sizes)):
         return eval_colours.copy()
     world = transform(verts, part.matrix_world)
-    normals, centroids = _newell(world, cv, fs, fz)
-    normals = _unit(normals)
-    face_of = np.repeat(np.arange(fs.size), fz)
-    p = world[cv]
-    samples = p + CORNER_INSET * (centroids[face_of] - p)
-    n = normals[face_of]
-    reach = np.linalg.norm(centroids[face_of] - p, axis=1) + 1e-9
-
-    ev = part.world_vertices
-    tri_corners = _fan(part.face_starts, part.face_sizes)
-    tri_pts = ev[part.corner_verts[tri_corners]]
-    tri_n = _unit(np.cross(tri_pts[:, 1] - tri_pts[:, 0], tri_pts[:, 2] - tri_pts[:, 0]))
-    bvh = build_bvh(tri_pts)
-    out = np.empty((cv.size, 3))
-    todo = np.arange(cv.size)
-    for inset in (CORNER_INSET,) + RETRY_INSETS:
-        s = p[todo] + inset * (centroids[face_of[todo]] - p[todo])
-        nt = n[todo]
-        # Start in front of the face at the face's own size and look back along -n: the first
-        # surface met from the front is the evaluated version of this face (shrunk, shifted or
-        # identical).
-        origins = s + nt * reach[todo, None]
-        t, tri = closest_hit(bvh, origins, -nt, 2.0 * reach[todo])
-        ok = tri >= 0
-        ok[ok] = np.einsum("ij,ij->i", tri_n[tri[ok]], nt[ok]) > NORMAL_AGREEMENT
-        if np.any(ok):
-            hit = origins[ok] - nt[ok] * t[ok, None]
-            a, b, c = (tri_pts[tri[ok], k] for k in range(3))
-            w = _barycentric(hit, a, b, c)
-            cols = eval_colours[tri_corners[tri[ok]]]           # (K, 3 corners, 3 rgb)
-            out[todo[ok]] = np.einsum("kj,kjc->kc", w, cols)
-        todo = todo[~ok]
-        if todo.size == 0:
-            return out
-    out[todo] = _nearest_corner_colours(samples[todo], n[todo], part, eval_colours)
-    return out
+    sources, weights = transfer.project_corners(
+        (world, cv, fs, fz),
+        (part.world_vertices, part.corner_verts, part.face_starts, part.face_sizes))
+    return transfer.interpolate(eval_colours, sources, weights)
 
 
-def _barycentric(p, a, b, c):
-    """(K, 3) barycentric weights of points p in triangles abc (clipped to the triangle)."""
-    v0, v1, v2 = b - a, c - a, p - a
-    d00 = np.einsum("ij,ij->i", v0, v0)
-    d01 = np.einsum("ij,ij->i", v0, v1)
-    d11 = np.einsum("ij,ij->i", v1, v1)
-    d20 = np.einsum("ij,ij->i", v2, v0)
-    d21 = np.einsum("ij,ij->i", v2, v1)
-    den = d00 * d11 - d01 * d01
-    den = np.where(np.abs(den) > 0, den, 1.0)
-    v = (d11 * d20 - d01 * d21) / den
-    w = (d00 * d21 - d01 * d20) / den
-    bary = np.clip(np.stack([1.0 - v - w, v, w], axis=1), 0.0, None)
-    return bary / np.maximum(bary.sum(axis=1, keepdims=True), 1e-30)
+# ------------------------------------------------------------------------ baked state of objects
 
 
-def _nearest_corner_colours(points, normals, part, eval_colours):
-    """Colour of the nearest evaluated corner whose face agrees with the normal (else nearest)."""
-    ev = part.world_vertices
-    face_n, centroids = _newell(ev, part.corner_verts, part.face_starts, part.face_sizes)
-    face_of = np.repeat(np.arange(part.face_starts.size), part.face_sizes)
-    q = ev[part.corner_verts]
-    q = q + CORNER_INSET * (centroids[face_of] - q)
-    qn = _unit(face_n)[face_of]
-    # Disagreeing corners are pushed beyond any real distance, so they win only if none agrees.
-    far = 4.0 * (np.ptp(np.concatenate([ev, points]), axis=0) ** 2).sum() + 1.0
-    best = np.empty(points.shape[0], dtype=np.int64)
-    for a in range(0, points.shape[0], NEAREST_CHUNK):
-        b = a + NEAREST_CHUNK
-        d = ((points[a:b, None, :] - q[None]) ** 2).sum(-1)
-        d += far * ((normals[a:b] @ qn.T) <= NORMAL_AGREEMENT)
-        best[a:b] = d.argmin(axis=1)
-    return eval_colours[best]
+def is_baked(obj):
+    """True if *obj* shows a baked mesh (its original is remembered)."""
+    return isinstance(obj.get(PROP_ORIGINAL), bpy.types.Mesh)
 
 
-def check_writable(objects, make_single_user):
-    """Raise WriteError unless every object's mesh can take its own colours.
+def original_mesh(obj):
+    """The user's mesh of *obj*: the remembered original if baked, else ``obj.data``."""
+    return obj[PROP_ORIGINAL] if is_baked(obj) else obj.data
+
+
+def _show_original(obj):
+    """Swap the original mesh and modifier flags back in; return the baked mesh (kept alive).
+
+    Materials the user put into the baked mesh's slots while baked (the material slot list edits
+    the object's mesh) go to the original's slots: a re-bake and Clear Bake keep that edit.
+    """
+    baked = obj.data
+    baked.use_fake_user = True            # zero users for a moment must not lose it
+    original = obj[PROP_ORIGINAL]
+    mats = original.materials
+    for i, mat in enumerate(baked.materials):
+        if i >= len(mats):
+            mats.append(mat)
+        elif mats[i] != mat:
+            mats[i] = mat
+    obj.data = original
+    flags = obj.get(PROP_MODIFIERS, {})
+    for mod in obj.modifiers:
+        if mod.name in flags:
+            mod.show_viewport, mod.show_render = (bool(x) for x in flags[mod.name])
+    return baked
+
+
+def _show_baked(obj, baked):
+    """Swap a baked mesh in and switch off the modifiers remembered as applied into it."""
+    obj.data = baked
+    baked.use_fake_user = False
+    flags = obj.get(PROP_MODIFIERS, {})
+    for mod in obj.modifiers:
+        if mod.name in flags:
+            mod.show_viewport = mod.show_render = False
+
+
+@contextmanager
+def originals_for_reading(scene, depsgraph):
+    """Show every baked object of *scene* with its original mesh and modifiers for a while.
+
+    Extraction runs inside: the depsgraph is re-evaluated on entry and on exit, and the baked
+    state comes back whatever happens (so a bake that fails or is cancelled changes nothing).
+    """
+    baked = [(obj, None) for obj in scene.objects if is_baked(obj) and obj.library is None]
+    if not baked:
+        yield
+        return
+    baked = [(obj, _show_original(obj)) for obj, _ in baked]
+    try:
+        depsgraph.update()
+        yield
+    finally:
+        for obj, mesh in baked:
+            _show_baked(obj, mesh)
+        depsgraph.update()
+
+
+def clear_bake(objects):
+    """Undo the bake on *objects*: baked meshes swapped back, ``Radiosity`` colours removed.
+
+    A baked object gets its original mesh back (the same datablock, untouched), with its former
+    fake-user flag and modifier flags; the baked mesh is deleted when nothing else uses it. Any
+    other object's mesh loses the ``Radiosity`` attribute (Existing Vertices output) and nothing
+    else.
+
+    Parameters
+    ----------
+    objects : iterable of bpy.types.Object
+
+    Returns
+    -------
+    int
+        Number of objects restored plus meshes whose attribute was removed.
+    """
+    done = 0
+    plain = set()
+    memory = _Memory()
+    for obj in objects:
+        if obj.type != "MESH" or obj.library is not None:
+            continue
+        if is_baked(obj):
+            memory.restore(obj)
+            done += 1
+        elif obj.data.library is None:
+            plain.add(obj.data)
+    return done + sum(clear_attribute(m) for m in plain)
+
+
+class _Memory:
+    """The pre-bake fake-user flag of every original mesh, over all baked objects of the file.
+
+    Objects that share an original remember the same flag (the one before the first of them was
+    baked), and the flag comes back only when the last of them is restored.
+    """
+
+    def __init__(self):
+        self.flag, self.count = {}, {}
+        for obj in bpy.data.objects:
+            if obj.type == "MESH" and is_baked(obj):
+                key = obj[PROP_ORIGINAL].as_pointer()
+                self.flag.setdefault(key, bool(obj.get(PROP_FAKE_USER, 0)))
+                self.count[key] = self.count.get(key, 0) + 1
+
+    def restore(self, obj):
+        """Original mesh, fake user and modifier flags back; our properties and mesh gone."""
+        original = obj[PROP_ORIGINAL]
+        key = original.as_pointer()
+        baked = _show_original(obj)
+        self.count[key] -= 1
+        if self.count[key] == 0:
+            original.use_fake_user = self.flag[key]
+        for prop in (PROP_ORIGINAL, PROP_FAKE_USER, PROP_MODIFIERS):
+            if prop in obj:
+                del obj[prop]
+        baked.use_fake_user = False
+        if baked.users == 0 and baked.get(PROP_BAKED):
+            bpy.data.meshes.remove(baked)
+
+    def install(self, obj, baked):
+        """Make *baked* the mesh of an unbaked *obj*, remembering the original state."""
+        original = obj.data
+        key = original.as_pointer()
+        self.flag.setdefault(key, original.use_fake_user)
+        self.count[key] = self.count.get(key, 0) + 1
+        obj[PROP_ORIGINAL] = original
+        obj[PROP_FAKE_USER] = int(self.flag[key])
+        obj[PROP_MODIFIERS] = {m.name: [int(m.show_viewport), int(m.show_render)]
+                               for m in obj.modifiers if m.show_viewport}
+        original.use_fake_user = True
+        _show_baked(obj, baked)
+
+
+# ------------------------------------------------------------------------------ checks and writes
+
+
+def check_writable(objects, make_single_user, *, mesh_output=False):
+    """Raise WriteError unless every object can take the result.
 
     Parameters
     ----------
     objects : list of bpy.types.Object
-        The original objects that will receive colours.
+        The original objects that will receive the result.
     make_single_user : bool
         Shared meshes will be copied (checked here, done by :func:`write_colours`).
+    mesh_output : bool
+        The result is a baked mesh per object (:func:`write_colours` otherwise): shared meshes
+        are fine (each object gets its own baked mesh) and the original mesh is never written.
     """
     for obj in objects:
-        mesh = obj.data
-        if mesh.library is not None or obj.library is not None:
+        if obj.library is not None or (not mesh_output and obj.data.library is not None):
             raise WriteError(f"Object '{obj.name}' uses linked data that cannot be written; "
                              "make it local first")
+        if mesh_output:
+            continue
+        mesh = original_mesh(obj)
         users = mesh.users - (1 if mesh.use_fake_user else 0)
         if users > 1 and not make_single_user:
             raise WriteError(f"Mesh '{mesh.name}' is shared by {users} objects (one is "
@@ -247,7 +308,9 @@ def write_colours(objects, parts, corner_colours, *, make_single_user):
     int
         Number of meshes written.
     """
-    check_writable([objects[p.object_name] for p in parts], make_single_user)
+    targets = [objects[p.object_name] for p in parts]
+    check_writable(targets, make_single_user)
+    clear_bake([o for o in targets if is_baked(o)])   # colours go onto the user's own mesh
     for part in parts:
         obj = objects[part.object_name]
         mesh = obj.data
@@ -258,6 +321,172 @@ def write_colours(objects, parts, corner_colours, *, make_single_user):
         eval_colours[part.eval_corner_of_scene] = corner_colours[part.corner_start:part.corner_stop]
         write_attribute(mesh, map_to_original(part, eval_colours, read_mesh_layout(mesh)))
     return len(parts)
+
+
+def output_by_part(parts, output):
+    """Output faces of every part: list of (F_part,) int64 arrays, in output order.
+
+    Raises WriteError if an output face lies in no part's faces (the result belongs to another
+    scene) -- except faces of emitters that are not objects (area lights), which are dropped.
+    """
+    ends = [p.face_start + p.face_starts.size for p in parts]
+    n_scene = max(ends + [int(output.face_parent.max()) + 1 if output.face_parent.size else 0])
+    owner = np.full(n_scene, -1, dtype=np.int64)
+    for i, part in enumerate(parts):
+        owner[part.face_start:part.face_start + part.face_starts.size] = i
+    own = owner[output.face_parent]
+    order = np.argsort(own, kind="stable")
+    counts = np.bincount(own[own >= 0], minlength=len(parts))
+    bounds = np.concatenate([[0], np.cumsum(counts)]) + np.count_nonzero(own < 0)
+    return [order[bounds[i]:bounds[i + 1]] for i in range(len(parts))]
+
+
+def part_mesh(part, output, faces):
+    """Arrays of the baked mesh of one part (object space, the object's own slots).
+
+    Parameters
+    ----------
+    part : extract.Part
+    output : core.outmesh.OutputMesh
+    faces : (F,) int64
+        Output faces of this part (:func:`output_by_part`).
+
+    Returns
+    -------
+    dict
+        ``vertices`` (V, 3), ``corner_verts`` (C,), ``face_starts``, ``face_sizes``,
+        ``face_materials`` (F,) int64, ``face_smooth`` (F,) bool, ``colours`` (C, 3),
+        ``uv_maps`` list of (name, (C, 2)), ``attributes`` list of (name, domain, data_type,
+        values per output vertex, corner or face). Faces wind like their parent face of the
+        user's mesh.
+    """
+    sizes = output.face_sizes[faces]
+    owner, local, starts = ragged(sizes)
+    corners = output.face_starts[faces][owner] + local
+    n_part = part.corner_stop - part.corner_start
+    src = output.corner_sources[corners] - part.corner_start
+    if src.size and (src.min() < 0 or src.max() >= n_part):
+        raise WriteError(f"The result for object '{part.object_name}' refers to corners of "
+                         "another object; bake again")
+    eval_src = part.eval_corner_of_scene[src]                       # (C, 3) evaluated corners
+    weights = output.corner_weights[corners]
+    parent = output.face_parent[faces] - part.face_start            # evaluated face
+    pos = transfer.interpolate(part.object_vertices[part.corner_verts], eval_src, weights)
+    # Faces wind like their parent in object space (a mirrored object's scene faces are reversed).
+    cv_out = output.corner_verts[corners]
+    normals, _ = transfer.face_frames(pos, np.arange(corners.size), starts, sizes)
+    pnorm, _ = transfer.face_frames(part.object_vertices, part.corner_verts, part.face_starts,
+                                    part.face_sizes)
+    flip = np.einsum("ij,ij->i", normals, pnorm[parent]) < 0
+    perm = np.where(flip[owner], starts[owner] + (sizes[owner] - local) % sizes[owner],
+                    np.arange(corners.size))
+    eval_src, weights, pos, cv_out = eval_src[perm], weights[perm], pos[perm], cv_out[perm]
+    colours = output.corner_colours[corners][perm]
+    verts, inverse = np.unique(cv_out, return_inverse=True)
+    inverse = inverse.ravel()
+    vpos = np.zeros((verts.size, 3))
+    np.add.at(vpos, inverse, pos)
+    vpos /= np.bincount(inverse, minlength=verts.size)[:, None]
+    attributes = [(name, domain, kind, _carry(values, domain, eval_src, weights, part, parent,
+                                              inverse, verts.size))
+                  for name, domain, kind, values in part.attributes]
+    return dict(vertices=vpos, corner_verts=inverse.astype(np.int64), face_starts=starts,
+                attributes=attributes,
+                face_sizes=sizes.astype(np.int64), face_materials=part.face_materials[parent],
+                face_smooth=part.face_smooth[parent], colours=colours,
+                uv_maps=[(name, transfer.interpolate(uv, eval_src, weights))
+                         for name, uv in part.uv_maps])
+
+
+def _carry(values, domain, eval_src, weights, part, parent, inverse, n_verts):
+    """An attribute of the evaluated mesh on the baked mesh's points, corners or faces.
+
+    Real values are interpolated; integer and boolean ones take the value of the heaviest source.
+    A point value is the mean over the output vertex's corners (they agree on a shared vertex).
+    """
+    if domain == "FACE":
+        return values[parent]
+    src = part.corner_verts[eval_src] if domain == "POINT" else eval_src
+    if values.dtype.kind == "f":
+        per_corner = transfer.interpolate(values, src, weights)
+    else:
+        per_corner = values[src[np.arange(src.shape[0]), weights.argmax(axis=1)]]
+    if domain == "CORNER":
+        return per_corner
+    if per_corner.dtype.kind == "f":
+        out = np.zeros((n_verts, per_corner.shape[1]))
+        np.add.at(out, inverse, per_corner)
+        return out / np.bincount(inverse, minlength=n_verts)[:, None]
+    out = np.empty((n_verts, per_corner.shape[1]), dtype=per_corner.dtype)
+    out[inverse] = per_corner
+    return out
+
+
+def new_mesh(name, arrays, part, materials):
+    """A new mesh datablock from :func:`part_mesh` arrays."""
+    mesh = bpy.data.meshes.new(name)
+    nv, nc, nf = len(arrays["vertices"]), len(arrays["corner_verts"]), len(arrays["face_starts"])
+    mesh.vertices.add(nv)
+    mesh.loops.add(nc)
+    mesh.polygons.add(nf)
+    mesh.vertices.foreach_set("co", arrays["vertices"].astype(np.float32).ravel())
+    mesh.loops.foreach_set("vertex_index", arrays["corner_verts"].astype(np.int32))
+    mesh.polygons.foreach_set("loop_start", arrays["face_starts"].astype(np.int32))
+    mesh.polygons.foreach_set("material_index", arrays["face_materials"].astype(np.int32))
+    mesh.polygons.foreach_set("use_smooth", arrays["face_smooth"].astype(bool))
+    mesh.update(calc_edges=True)
+    for i, (uv_name, uv) in enumerate(arrays["uv_maps"]):
+        layer = mesh.uv_layers.new(name=uv_name, do_init=False)
+        layer.uv.foreach_set("vector", uv.astype(np.float32).ravel())
+        if i == part.uv_active:
+            mesh.uv_layers.active = layer
+        if i == part.uv_render:
+            layer.active_render = True
+    for name, domain, kind, values in arrays["attributes"]:
+        prop, _, dtype = ATTRIBUTE_TYPES[kind]
+        mesh.attributes.new(name, kind, domain).data.foreach_set(prop, values.astype(dtype).ravel())
+    for mat in materials:
+        mesh.materials.append(mat)
+    mesh[PROP_BAKED] = 1
+    write_attribute(mesh, arrays["colours"])
+    return mesh
+
+
+def write_mesh(objects, parts, output):
+    """Give every baked object its baked mesh (the radiosity mesh over its faces).
+
+    Parameters
+    ----------
+    objects : dict of str -> bpy.types.Object
+        Original objects by name.
+    parts : list of extract.Part
+    output : core.outmesh.OutputMesh
+
+    Returns
+    -------
+    list of dict
+        Per object: ``object``, ``input_faces`` (evaluated faces), ``output_vertices``,
+        ``output_faces``.
+    """
+    targets = [objects[p.object_name] for p in parts]
+    check_writable(targets, False, mesh_output=True)
+    per_part = output_by_part(parts, output)
+    # Everything is computed before the first object changes: an error leaves the scene as is.
+    built = []
+    for part, faces in zip(parts, per_part):
+        built.append(part_mesh(part, output, faces))
+    summary = []
+    memory = _Memory()
+    for obj, part, arrays in zip(targets, parts, built):
+        if is_baked(obj):
+            memory.restore(obj)
+        original = obj.data
+        mesh = new_mesh(original.name + BAKED_SUFFIX, arrays, part, list(original.materials))
+        memory.install(obj, mesh)
+        summary.append(dict(object=obj.name, input_faces=int(part.face_starts.size),
+                            output_vertices=len(mesh.vertices),
+                            output_faces=len(mesh.polygons)))
+    return summary
 
 
 def show_in_viewports(screens, show=True):

@@ -1,13 +1,23 @@
-"""Build sample_blends/apartment.blend: a 12 x 8 x 2.8 m apartment/gallery, > 20,000 faces.
+"""Build sample_blends/apartment.blend: a 12 x 8 x 2.8 m apartment/gallery, modelled coarse.
 
-Run: ``.venv/bin/python scripts/make_apartment.py [--face-size 0.13] [--out ...]``
+Run with the oldest supported Blender's bpy (Blender 5 writes files 4.x cannot open)::
+
+    .venv-bpy42/bin/python scripts/make_apartment.py              # sample_blends/apartment.blend
+    .venv-bpy42/bin/python scripts/make_apartment.py --face-size 0.13 \
+        --out bench/blends/apartment.blend                         # the benchmark's copy
+
+By default surfaces are modelled as an architect would (see make_office.py): one quad per wall
+side, floor, ceiling, plinth side and luminaire, doorways and the window as the few quads around
+them. ``--face-size`` meshes them as grids instead: the benchmark's pre-meshed copy
+(bench/blends/), > 20,000 faces at 0.13 m.
 
 Three rooms: two 6 x 4 m rooms on the west side (separated by a 0.1 m thick wall with a doorway)
 and a 6 x 8 m gallery on the east, joined through two doorways in a 0.1 m thick wall; a window
 opening (no glass) in the gallery's south wall; six plinths in the gallery; one luminaire panel in
 each small room and four in the gallery (5 cm below the ceiling, emitting from both faces in
-Cycles). Faces <= 0.13 m give ~25,000 faces: at the default 0.5 m patch size our engine needs one
-patch per face, i.e. well over 20,000 patches. Same materials and conventions as make_office.py.
+Cycles). In the benchmark's copy, faces <= 0.13 m give ~25,000 faces: at the default 0.5 m
+patch size our engine needs one patch per face, i.e. well over 20,000 patches. Same materials and
+conventions as make_office.py.
 """
 
 import sys
@@ -44,14 +54,16 @@ def _wall(b, axis, at, lo, hi, H, doors, mat="wall", t=0.1):
             b.rect((s1, a1, 0), (-L, 0, 0), (0, 0, H), mat,
                    hole=(L - hole[1], L - hole[0], 0, hole[3]) if hole else None)      # +y side
     for d0, d1, dh in doors:   # reveals: jambs face into the doorway, head faces down
+        # (normal = u x v). The benchmark's copy in bench/blends/ was made before this was
+        # put right (7 reveal faces there face into the wall); its figures stand for that file.
         if axis == "x":
-            b.rect((a0, d0, 0), (t, 0, 0), (0, 0, dh), mat)                            # +y
-            b.rect((a1, d1, 0), (-t, 0, 0), (0, 0, dh), mat)                           # -y
+            b.rect((a0, d0, 0), (0, 0, dh), (t, 0, 0), mat)                            # +y
+            b.rect((a1, d1, 0), (0, 0, dh), (-t, 0, 0), mat)                           # -y
             b.rect((a0, d0, dh), (0, d1 - d0, 0), (t, 0, 0), mat)                      # -z
         else:
-            b.rect((d0, a1, 0), (0, -t, 0), (0, 0, dh), mat)                           # +x
-            b.rect((d1, a0, 0), (0, t, 0), (0, 0, dh), mat)                            # -x
-            b.rect((d0, a0, dh), (d1 - d0, 0, 0), (0, t, 0), mat)                      # -z
+            b.rect((d0, a1, 0), (0, 0, dh), (0, -t, 0), mat)                           # +x
+            b.rect((d1, a0, 0), (0, 0, dh), (0, t, 0), mat)                            # -x
+            b.rect((d0, a0, dh), (0, t, 0), (d1 - d0, 0, 0), mat)                      # -z
 
 
 def build_apartment(face_size=0.13):

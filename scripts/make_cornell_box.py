@@ -4,8 +4,15 @@ Run from the repository with the bpy module of the OLDEST supported Blender (4.2
 Blender 5 writes .blend files that Blender 4.x cannot read, while 5.x reads 4.2's::
 
     .venv-bpy42/bin/python scripts/make_cornell_box.py [--output sample_blends/cornell_box.blend]
+    .venv-bpy42/bin/python scripts/make_cornell_box.py --grid 0.05 \
+        --output bench/blends/cornell_box.blend        # the benchmark's pre-meshed copy
 
-Geometry, reflectances and the light's colour come from core.samples (one source of truth with the
+By default every surface is modelled as it is published (a wall is one quad, a block five quads,
+the red wall two triangles): the bake's radiosity mesh subdivides where the light changes. The
+benchmark (bench/compare) compares per face with Cycles and needs small faces, so its copy is
+meshed as grids of ``--grid`` metres (every patch corner a mesh vertex).
+
+Geometry, reflectances and the light's colour come from bench.scenes (one source of truth with the
 core's tests), which follows ../shared/reference/cornell_box.md: y and z swapped with handedness
 kept (Blender X = x, Y = -z, Z = y), millimetres to metres, the light in an opening of the
 ceiling (nothing coincides with it; its back side emits out of the box, as the real box's light
@@ -31,9 +38,8 @@ LIGHT_STRENGTH = 50.0
 #: ~1300 patches, a bake of seconds.
 PATCH_SIZE = 0.05
 
-#: Vertex colours live on mesh corners, so a wall of four vertices can only show a gradient. The
-#: surfaces are therefore modelled as grids of this spacing (the patch size): every patch corner is
-#: a mesh vertex and the bake's shadows and colour bleeding show. The light stays one quad.
+#: Grid spacing of the benchmark's pre-meshed copy (``--grid``): the patch size, so every patch
+#: corner is a mesh vertex. The light stays one quad.
 GRID = PATCH_SIZE
 
 
@@ -45,12 +51,13 @@ def _load_package():
     return bootstrap.load_package()
 
 
-def build(pkg):
-    """Build the Cornell box in a fresh empty file."""
+def build(pkg, grid=None):
+    """Build the Cornell box in a fresh empty file (surfaces split into ``grid``-metre grids, or
+    whole with None)."""
     import bpy
     import numpy as np
 
-    samples = importlib.import_module(f"{pkg.__name__}.core.samples")
+    samples = importlib.import_module(f"{pkg.__name__}.bench.scenes")
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     colours = {"white": samples.CORNELL_WHITE, "red": samples.CORNELL_RED,
@@ -77,8 +84,7 @@ def build(pkg):
     for name, pts, mat in samples.cornell_geometry():
         groups.setdefault(name, []).append((np.asarray(pts), mat))
     for name, polys in groups.items():
-        grid = None if polys[0][1] == "light" else GRID
-        n = max(_divisions(pts, grid) for pts, _ in polys)
+        n = max(_divisions(pts, None if polys[0][1] == "light" else grid) for pts, _ in polys)
         verts, faces = _merge([_grid(pts, n) for pts, _ in polys])
         mesh = bpy.data.meshes.new(name)
         mesh.from_pydata(verts.tolist(), [], faces)
@@ -100,7 +106,8 @@ def build(pkg):
     scene.render.resolution_x = 512
     scene.render.resolution_y = 512
     scene.unit_settings.system = "METRIC"
-    scene.radiosity.patch_size = PATCH_SIZE
+    if grid is not None:
+        scene.radiosity.patch_size = PATCH_SIZE
     return scene
 
 
@@ -163,13 +170,21 @@ def _merge(pieces):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--output", default=os.path.join(ROOT, "sample_blends", "cornell_box.blend"))
+    parser.add_argument("--grid", type=float, default=None,
+                        help=f"mesh the surfaces as grids of this size in metres (the benchmark "
+                             f"copy uses {GRID}); default: as published, one polygon per surface")
     args = parser.parse_args(argv)
+    if args.grid is not None and not args.grid > 0:
+        parser.error(f"--grid must be > 0; got {args.grid}")
     pkg = _load_package()
     import bpy
 
     pkg.register()
     try:
-        build(pkg)
+        build(pkg, args.grid)
+        sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+        from make_office import camera_view
+        camera_view(bpy.data.screens)
         out = os.path.abspath(args.output)
         os.makedirs(os.path.dirname(out), exist_ok=True)
         bpy.ops.wm.save_as_mainfile(filepath=out, compress=True, check_existing=False)

@@ -1,6 +1,16 @@
-"""Build sample_blends/office.blend: a 6 x 4 x 3 m office for the speed/accuracy benchmark.
+"""Build sample_blends/office.blend: a 6 x 4 x 3 m office, modelled as an architect would.
 
-Run: ``.venv/bin/python scripts/make_office.py [--face-size 0.2] [--out sample_blends/office.blend]``
+Run with the oldest supported Blender's bpy (Blender 5 writes files 4.x cannot open)::
+
+    .venv-bpy42/bin/python scripts/make_office.py                 # sample_blends/office.blend
+    .venv-bpy42/bin/python scripts/make_office.py --face-size 0.2 --out bench/blends/office.blend
+
+By default every surface is as few polygons as its shape needs: a wall, the floor, the ceiling,
+a luminaire, a box side is one quad; the wall with the opening is the eight quads around it (its
+floor and ceiling edges meet the whole floor and ceiling quads at T-junctions, as imported models
+do). The bake's radiosity mesh subdivides where the light changes. ``--face-size`` splits every
+surface into a grid of at most that size instead: the pre-meshed copy the benchmark compares per
+face with Cycles (bench/blends/).
 
 Contents: room (normals inward) with an opening 1.2 x 1.5 m in the south wall (no glass: light
 escapes, the outside is black), a terracotta accent wall (west), four 0.6 m ceiling luminaire
@@ -8,7 +18,7 @@ panels hanging 5 cm below the ceiling (they emit from both faces in Cycles, so t
 ceiling above them), a desk and a shelving unit. All materials are Lambertian Principled BSDFs
 (Specular IOR Level 0); luminaires have Base Color 0 so that they reflect nothing in every program.
 
-Faces are split into a grid of at most ``face_size`` (default 0.2 m): per-face comparison with
+The benchmark's copy has faces of at most ``face_size`` = 0.2 m: per-face comparison with
 Cycles needs faces small against the light's variation (the corners are point samples in Cycles
 and area averages of patches in our bake); 0.2 m gives ~3,500 faces, so a Cycles bake stays
 affordable on 2 cores, and our engine's patch-size sweep (patches <= faces) starts at 0.2 m.
@@ -176,17 +186,31 @@ def build_office(face_size=0.2):
     add_camera((5.6, 0.4, 1.6), (1.5, 3.2, 1.0))
 
 
+def camera_view(screens):
+    """Open the file looking through the scene camera in every 3D view (framed on the room)."""
+    for screen in screens:
+        for area in screen.areas:
+            if area.type == "VIEW_3D":
+                for space in area.spaces:
+                    if space.type == "VIEW_3D":
+                        space.region_3d.view_perspective = "CAMERA"
+
+
 def main(argv=None, build=build_office, default_out="sample_blends/office.blend", face_size=0.2):
+    """Build and save the scene; ``face_size`` is the benchmark copy's (``--face-size``) in help."""
     import bpy
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--face-size", type=float, default=face_size, help="max face edge (m)")
+    ap.add_argument("--face-size", type=float, default=None,
+                    help="split surfaces into faces of at most this size in metres (the "
+                         "benchmark copy uses %g); default: as modelled" % face_size)
     ap.add_argument("--out", default=str(ROOT / default_out))
     args = ap.parse_args(argv)
-    if not args.face_size > 0:
+    if args.face_size is not None and not args.face_size > 0:
         ap.error("--face-size must be > 0; got %r" % args.face_size)
-    build(args.face_size)
+    build(math.inf if args.face_size is None else args.face_size)
+    camera_view(bpy.data.screens)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    bpy.ops.wm.save_as_mainfile(filepath=str(Path(args.out).resolve()))
+    bpy.ops.wm.save_as_mainfile(filepath=str(Path(args.out).resolve()), compress=True)
     faces = sum(len(ob.data.polygons) for ob in bpy.context.scene.objects if ob.type == "MESH")
     print("wrote %s: %d faces" % (args.out, faces))
 

@@ -27,7 +27,7 @@ def main(argv=None):
     from core.bake import BakeSettings, bake
     from core.scene import make_scene
 
-    sc = cycles.load(Path(ROOT) / "sample_blends" / ("%s.blend" % args.scene))
+    sc = cycles.load(Path(ROOT) / "bench" / "blends" / ("%s.blend" % args.scene))
     arrays = cycles.extract(sc)
     scene = make_scene(**arrays)
     ps = _face_size(arrays) * (1 + 1e-6)

@@ -408,8 +408,9 @@ def summary(rows):
 def main(argv=None):
     ap = argparse.ArgumentParser(description="Speed against accuracy: ours, Cycles, Radiance.")
     ap.add_argument("--scenes", nargs="+", default=["office", "apartment"], choices=SCENES)
-    ap.add_argument("--blend-dir", default=str(ROOT / "sample_blends"),
-                    help="folder of <scene>.blend files")
+    ap.add_argument("--blend-dir", default=str(ROOT / "bench" / "blends"),
+                    help="folder of <scene>.blend files (the pre-meshed copies: per-face "
+                         "comparison with Cycles needs small faces)")
     ap.add_argument("--quick", action="store_true", help="CI-sized sweep (minutes)")
     ap.add_argument("--cycles-samples", nargs="+", type=int, default=None)
     ap.add_argument("--resolutions", nargs="+", type=int, default=None)
@@ -463,7 +464,8 @@ def main(argv=None):
     for name in args.scenes:
         blend = Path(args.blend_dir) / ("%s.blend" % name)
         if not blend.exists():
-            print("%s: %s missing (run scripts/make_%s.py); skipped" % (name, blend, name))
+            print("%s: %s missing (run scripts/make_%s.py with --face-size/--grid and --out/"
+                  "--output %s); skipped" % (name, blend, name, blend))
             continue
         print("%s:" % name, flush=True)
         rows = run_scene(name, blend, args, rng)
