@@ -8,8 +8,8 @@ Scenes (tests/core/test_adaptive.py builds them; the oracles are the same):
 * ``ground``: a closed 3 m room (one quad per wall, light inside) on a 100 x 100 m ground plane:
   time and vertex counts only.
 * ``--room``: bench.scenes.room_with_boxes modelled as an architect would (one quad per
-  rectangle) baked with output='mesh' and 'vertices', against the same engine on a pre-meshed
-  copy (``--room-quads`` quads, output='vertices', patch_size 0.25 m): area-weighted relative
+  rectangle) baked with output_mode='mesh' and 'vertices', against the same engine on a pre-meshed
+  copy (``--room-quads`` quads, output_mode='vertices', patch_size 0.25 m): area-weighted relative
   RMS of the luminance over the pre-meshed copy's faces (each face: its corners' mean; the coarse
   field interpolated at the same corners).
 
@@ -81,7 +81,7 @@ def field_at(mesh, scene, points, objects):
     return out
 
 
-RUNS = [dict(), dict(output="vertices"), dict(contrast=0.2), dict(min_element=0.1),
+RUNS = [dict(), dict(output_mode="vertices"), dict(contrast=0.2), dict(min_element=0.1),
         dict(patch_size=0.5)]
 
 
@@ -91,7 +91,7 @@ def room(n_quads):
     fine = room_with_boxes(n_quads)
     coarse = room_with_boxes(1)
     t = time.perf_counter()
-    ref = bake(fine, BakeSettings(output="vertices", patch_size=0.25))
+    ref = bake(fine, BakeSettings(output_mode="vertices", patch_size=0.25))
     print(f"room reference: {fine.n_faces} faces, {time.perf_counter() - t:.1f} s", flush=True)
     corners, faces = fine.face_corner_indices()
     emits = np.any(fine.emission[fine.face_materials] > 0, axis=1)

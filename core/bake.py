@@ -58,11 +58,11 @@ class BakeResult:
         ``solver``, ``iterations``, ``residual``, ``converged``, ``timings``, ``energy``,
         ``form_factor_bytes`` (rows kept for relight; 0 after a matrix-free bake),
         ``matrix_bytes`` (the dense matrix built for the solve, or the row cache of a
-        matrix-free solve; freed after it), ``warnings``; ``mesh`` with ``output='mesh'``:
+        matrix-free solve; freed after it), ``warnings``; ``mesh`` with ``output_mode='mesh'``:
         see :func:`core.adaptive.adaptive_output`; ``face_variation`` with
-        ``output='vertices'``: see :func:`core.criteria.face_variation`).
+        ``output_mode='vertices'``: see :func:`core.criteria.face_variation`).
     output : core.outmesh.OutputMesh or None
-        The radiosity mesh (``output='mesh'``); None with ``output='vertices'``.
+        The radiosity mesh (``output_mode='mesh'``); None with ``output_mode='vertices'``.
     """
 
     corner_colours: np.ndarray
@@ -111,7 +111,7 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
         raise TypeError(f"settings must be a BakeSettings; got {type(settings).__name__}")
     t_start = time.perf_counter()
     if settings.patch_size is None:
-        settings = dataclasses.replace(settings, patch_size=0.5 if settings.output == "vertices"
+        settings = dataclasses.replace(settings, patch_size=0.5 if settings.output_mode == "vertices"
                                        else coarse_patch_size(scene))
 
     levels = settings.refine_levels
@@ -254,7 +254,7 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     monitor.update(0.0, "form factors")
     t0 = time.perf_counter()
     skip_late = None
-    if settings.output == "mesh":          # unlit surfaces cost nothing (core.criteria)
+    if settings.output_mode == "mesh":          # unlit surfaces cost nothing (core.criteria)
         def skip_late(active, late):
             return unlit_late_nodes(scene, patches, active, late, settings.resolution)
     if kept is None:
@@ -277,7 +277,7 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     t0 = time.perf_counter()
     gather = kept.gather if kept is not None else None
     mesh = mesh_report = None
-    if settings.output == "mesh":
+    if settings.output_mode == "mesh":
         corner, mesh, gather, mesh_report = mesh_colours(
             scene, settings, patches, sol.node_radiance, sol.incident, gather, contact_lines,
             monitor, lambda: corner_colours(scene, patches, sol.node_radiance[:P],

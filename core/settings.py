@@ -179,7 +179,7 @@ OUTPUTS = (
 
 #: The settings table. Order: the panel's and the report's.
 TABLE = (
-    Setting("output", "choice", "mesh", "Output", "What the bake writes", choices=OUTPUTS,
+    Setting("output_mode", "choice", "mesh", "Output", "What the bake writes", choices=OUTPUTS,
             exposed=True, doc="core.adaptive: the solve stays on the coarse patches; elements "
             "are receivers, refined where the light changes, conformed and gathered."),
     Setting("patch_size", "float", None, "Patch Size",

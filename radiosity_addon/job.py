@@ -92,7 +92,7 @@ def prepare(context, options):
     objects = context.scene.objects
     try:
         check_writable([objects[p.object_name] for p in ext.parts],
-                       options["make_single_user"], mesh_output=settings.output == "mesh")
+                       options["make_single_user"], mesh_output=settings.output_mode == "mesh")
     except WriteError as exc:
         raise BakeError(str(exc)) from exc
     return BakeInput(scene, settings, ext, context.scene.name, options["make_single_user"],

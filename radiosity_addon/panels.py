@@ -51,18 +51,18 @@ class VIEW3D_PT_radiosity(bpy.types.Panel):
         layout.use_property_split = False
         layout.use_property_decorate = False
         props = context.scene.radiosity
-        _split_row(layout, "Output").prop(props, "output", text="")
+        _split_row(layout, "Output").prop(props, "output_mode", text="")
         col = layout.column(align=True)
         col.prop(props, "patch_size")
         sub = col.column(align=True)
-        sub.active = props.output == "MESH"
+        sub.active = props.output_mode == "MESH"
         sub.prop(props, "contrast")
         _split_row(layout, "Method").prop(props, "method", text="")
         sub = layout.column()
         sub.active = props.method in ("HEMICUBE", "HYBRID")
         sub.prop(props, "resolution", text="Resolution")
         row = _split_row(layout, "Corners")
-        row.active = props.output == "VERTICES"
+        row.active = props.output_mode == "VERTICES"
         row.prop(props, "corners", text="")
         col = layout.column(align=True)
         sub = col.column(align=True)
@@ -99,7 +99,7 @@ def draw_advanced(layout, props):
     """Solver and scope settings (the folded part of the panel)."""
     _split_row(layout, "Solver").prop(props, "solver", text="")
     col = layout.column(align=True)
-    col.active = props.output == "MESH"
+    col.active = props.output_mode == "MESH"
     col.prop(props, "min_element")
     col.prop(props, "vertex_budget")
     col = layout.column(align=True)

@@ -103,7 +103,8 @@ def test_corner_and_refinement_options_reach_the_bake(package, tmp_path):
     src, out = tmp_path / "scene.blend", tmp_path / "out.blend"
     save_scene(src, patch_size=0.5)
     proc = run_batch(src, "--output", out, "--report", tmp_path / "r.json",
-                     "--corners", "average", "--refine-levels", "1")
+                     "--corners", "average", "--refine-levels", "1",
+                     "--output-mode", "vertices")
     assert proc.returncode == 0, proc.stderr
     report = json.loads((tmp_path / "r.json").read_text())
     assert report["settings"]["corners"] == "average"

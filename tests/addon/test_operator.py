@@ -56,6 +56,8 @@ def test_furnace_gives_le_over_one_minus_rho(package):
 
 
 def test_attribute_name_type_domain_size_and_nothing_else(package):
+    # Existing Vertices output: colours written on the user's own corners.
+    set_settings(bpy.context.scene, output_mode="VERTICES")
     floor, lamp = light_over_floor()
     other = floor.data.color_attributes.new("Col", "BYTE_COLOR", "POINT")
     other.data.foreach_set("color", np.linspace(0, 1, 16, dtype=np.float32))
@@ -108,6 +110,8 @@ def _room_object():
 
 
 def test_values_equal_core_for_same_arrays_with_ngon(package):
+    # Existing Vertices output: colours written on the user's own corners.
+    set_settings(bpy.context.scene, output_mode="VERTICES")
     # The oracle builds the world-space arrays itself and calls the core directly. Location and
     # scale are exact in float32, so both routes hand the core bit-identical positions and the
     # results must agree to float32 storage of the attribute.
@@ -122,7 +126,8 @@ def test_values_equal_core_for_same_arrays_with_ngon(package):
     scene = core.make_scene(world, np.concatenate(faces), np.cumsum(sizes) - sizes, sizes,
                             [0, 0, 1], [(0.6, 0.5, 0.4), (0.2, 0.2, 0.2)],
                             [(0, 0, 0), (3.0, 2.7, 2.4)])
-    want = core.bake(scene, core.BakeSettings(patch_size=0.4, resolution=32, solver="direct"))
+    want = core.bake(scene, core.BakeSettings(patch_size=0.4, resolution=32, solver="direct",
+                                                       output_mode="vertices"))
     assert report["patches"] == want.report["patches"]
     np.testing.assert_allclose(got, want.corner_colours, rtol=F32_RTOL, atol=1e-6)
 
@@ -175,6 +180,8 @@ def _corner_keys(obj):
 
 @pytest.mark.parametrize("kind", ["ARRAY", "MIRROR", "SUBSURF_SIMPLE"])
 def test_topology_modifiers_write_what_the_user_sees(package, kind):
+    # Existing Vertices output: colours written on the user's own corners.
+    set_settings(bpy.context.scene, output_mode="VERTICES")
     # Oracle: the same scene with the modifier applied (its evaluated mesh made real), baked
     # again. An original corner must get the colour of the applied mesh's corner at the same
     # position on a face with the same normal (these modifiers keep the original positions).
@@ -252,6 +259,8 @@ def test_catmull_clark_corners_sample_their_own_face_of_the_limit_surface(packag
 
 
 def test_instances_light_the_scene_but_receive_nothing(package):
+    # Existing Vertices output: colours written on the user's own corners.
+    set_settings(bpy.context.scene, output_mode="VERTICES")
     # The floor is a 2 x 2 grid of quads, so it has a vertex at its centre, right under the
     # instanced blocker: from there the whole lamp is hidden (the blocker's shadow cone through
     # the lamp's edges reaches +-0.25 m at the blocker's height, the blocker spans +-0.3 m).
@@ -314,6 +323,8 @@ def test_geometry_nodes_instances_take_part(package):
 
 
 def test_shared_mesh_stops_or_gets_single_user(package):
+    # Existing Vertices output: colours written on the user's own corners.
+    set_settings(bpy.context.scene, output_mode="VERTICES")
     floor, lamp = light_over_floor()
     twin = bpy.data.objects.new("Twin", floor.data)
     twin.location = (3.0, 0.0, 0.0)
@@ -329,6 +340,8 @@ def test_shared_mesh_stops_or_gets_single_user(package):
 
 
 def test_missing_material_uses_documented_grey_and_warns(package):
+    # Existing Vertices output: colours written on the user's own corners.
+    set_settings(bpy.context.scene, output_mode="VERTICES")
     floor, lamp = light_over_floor()
     report = bake_ok(patch_size=0.5, resolution=16, solver="DIRECT")
     with_grey = read_colours(floor.data)
@@ -548,6 +561,8 @@ def test_panel_properties_are_the_settings_table(package):
         if row.type == "choice":
             assert prop.default.lower() == row.default
             assert [i.identifier.lower() for i in prop.enum_items] == list(row.values())
+        elif row.auto and row.default is None:     # "auto" is 0 in the panel
+            assert prop.default == 0
         else:
             assert prop.default == pytest.approx(row.default)
         if row.type in ("int", "float") and row.low is not None:
@@ -558,8 +573,8 @@ def test_panel_properties_are_the_settings_table(package):
     defaults = settings.BakeSettings()
     for name in settings.EXPOSED:      # float32 in Blender: 1e-4 comes back as 9.99999974e-05
         want = getattr(defaults, name)
-        if isinstance(want, str):
-            assert options[name] == want
+        if isinstance(want, str) or want is None:
+            assert options[name] == want, name
         else:
             assert options[name] == pytest.approx(want, rel=1e-6), name
 
@@ -606,7 +621,7 @@ def test_panel_draws_every_setting_the_button_and_the_summary(package):
         assert name in drawn, name
     # Quality settings come first, the advanced ones after the bake button (folded sub-panel).
     order = [a[1] if kind == "prop" else a[0] for kind, a, _ in log if kind in ("prop", "operator")]
-    assert order.index("patch_size") == 0
+    assert order.index("output_mode") == 0 and order.index("patch_size") == 1
     assert order.index("radiosity.bake") < order.index("solver")
     assert bpy.context.window_manager.radiosity_show_advanced is False  # folded by default
     labels = [k.get("text", "") for kind, a, k in log if kind == "label"]

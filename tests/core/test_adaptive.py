@@ -1,4 +1,4 @@
-"""The adaptive radiosity mesh (output='mesh'): the written field, checked against closed forms.
+"""The adaptive radiosity mesh (output_mode='mesh'): the written field, checked against closed forms.
 
 Oracles, independent of the engine:
 
@@ -80,7 +80,7 @@ def floor_points(n=12, lo=0.05, hi=3.95):
 @pytest.fixture(scope="module")
 def one_quad():
     scene = one_quad_scene()
-    return scene, bake(scene, BakeSettings(output="mesh"))
+    return scene, bake(scene, BakeSettings(output_mode="mesh"))
 
 
 def test_one_quad_receiver_matches_the_exact_field(one_quad):
@@ -95,7 +95,7 @@ def test_one_quad_receiver_matches_the_exact_field(one_quad):
     err = np.abs(field - exact) / exact.max()
     assert err.max() <= FIELD_MAX_TOL, f"max error {err.max():.3%} of the peak"
     # The same engine writing only at the user's corners cannot show the pool of light.
-    old = bake(scene, BakeSettings(output="vertices"))
+    old = bake(scene, BakeSettings(output_mode="vertices"))
     assert old.output is None
     floor = old.corner_colours[:4, 0]                            # bilinear over the one quad
     u, v = pts[:, 0] / 4, pts[:, 1] / 4
@@ -163,7 +163,7 @@ def test_closed_furnace_stays_coarse_and_exact():
     assert result.output.vertices.shape[0] <= 2 * scene.n_corners
     assert all(step.get("split", 0) == 0 for step in result.report["mesh"]["levels"])
     np.testing.assert_allclose(result.output.corner_colours, 1.0 / (1 - 0.5), rtol=FURNACE_TOL)
-    varying = bake(scene, BakeSettings(output="vertices")).report["face_variation"]
+    varying = bake(scene, BakeSettings(output_mode="vertices")).report["face_variation"]
     assert varying["faces_varying"] == 0
 
 
@@ -239,7 +239,7 @@ def test_box_penumbra_matches_quadrature(box_bake):
 
 # ------------------------------------------------------------------ settings, old output
 @pytest.mark.parametrize("name, value", [
-    ("output", "corners"), ("contrast", 0.0), ("contrast", 1.0), ("min_element", 0.0),
+    ("output_mode", "corners"), ("contrast", 0.0), ("contrast", 1.0), ("min_element", 0.0),
     ("min_element", float("inf")), ("vertex_budget", 3), ("vertex_budget", 10.5),
     ("patch_size", -1.0)])
 def test_bad_settings_name_the_setting(name, value):
@@ -249,8 +249,8 @@ def test_bad_settings_name_the_setting(name, value):
 
 def test_vertices_output_is_the_old_default():
     scene = one_quad_scene()
-    a = bake(scene, BakeSettings(output="vertices"))
-    b = bake(scene, BakeSettings(output="vertices", patch_size=0.5))
+    a = bake(scene, BakeSettings(output_mode="vertices"))
+    b = bake(scene, BakeSettings(output_mode="vertices", patch_size=0.5))
     assert a.output is None and "mesh" not in a.report
     np.testing.assert_array_equal(a.corner_colours, b.corner_colours)
 

@@ -87,10 +87,10 @@ def test_two_sided_panel_lights_ceiling_from_its_back():
     # (Howell). Tolerance 4 %: hemicube proximity error of 0.25 m patches at 1 m (~2 %) and
     # R = 32 aliasing.
     scene = _panel_under_ceiling(n=4)
-    # output='vertices': every front node solved (late rows); the mesh output skips unlit faces.
-    two = bake(scene, _settings(patch_size=1.0, rotate_hemicube=False, output="vertices"))
+    # output_mode='vertices': every front node solved (late rows); the mesh output skips unlit faces.
+    two = bake(scene, _settings(patch_size=1.0, rotate_hemicube=False, output_mode="vertices"))
     one = bake(scene, _settings(patch_size=1.0, rotate_hemicube=False, two_sided=False,
-                                output="vertices"))
+                                output_mode="vertices"))
     P = two.report["patches"]
     ceiling = slice(0, P // 2)
     mean = two.patch_radiance[ceiling].mean(axis=0)
@@ -233,9 +233,9 @@ def test_relight_equals_fresh_bake(small_room, monkeypatch):
     # Receiver elements are placed where the first bake's light changes, and a relight keeps
     # them (tests/core/test_elements.py): a fresh bake under other lights may place them
     # elsewhere. Without elements a relight must equal a fresh bake exactly.
-    # output='vertices': the mesh output also keeps its mesh (placed by the first bake's light).
+    # output_mode='vertices': the mesh output also keeps its mesh (placed by the first bake's light).
     base = bake(small_room, _settings(patch_size=1.0, solver="direct", element_levels=0,
-                                      output="vertices"))
+                                      output_mode="vertices"))
     original = base.node_radiance.copy()
     rho = small_room.reflectance.copy()
     rho[0] = [0.5, 0.6, 0.3]
@@ -250,7 +250,7 @@ def test_relight_equals_fresh_bake(small_room, monkeypatch):
                                                           small_room.face_sizes)],
         small_room.face_materials, rho, emission)
     fresh = bake(fresh_scene, _settings(patch_size=1.0, solver="direct", element_levels=0,
-                                        output="vertices"))
+                                        output_mode="vertices"))
     np.testing.assert_allclose(re.corner_colours, fresh.corner_colours, rtol=1e-10, atol=1e-12)
     # Wall-clock comparison kept loose: BLAS threads compete with other processes here.
     assert re.report["timings"]["form_factors"] < 0.1 * fresh.report["timings"]["form_factors"]
@@ -271,7 +271,7 @@ def test_relight_new_emitter_computes_only_new_rows():
     rho = np.vstack([a.reflectance, a.reflectance])
     em_a = np.vstack([a.emission, np.zeros((6, 3))])
     em_b = np.vstack([a.emission, a.emission * 2])
-    s = _settings(patch_size=1.0, rotate_hemicube=False, output="vertices")   # late rows
+    s = _settings(patch_size=1.0, rotate_hemicube=False, output_mode="vertices")   # late rows
     first = bake(scene_from_polygons(verts, polys, mats, rho, em_a), s)
     # All 12 front nodes are solved; of the back nodes only box A's light's (it emits).
     assert first.report["nodes_active"] == 13

@@ -55,7 +55,7 @@ def test_gathered_corner_equals_rho_le_f_at_the_vertex():
     corner = np.flatnonzero((scene.corner_verts == 0))
     np.testing.assert_allclose(res.corner_colours[corner], 0.5 * 2.0 * F_CORNER_UNIT, rtol=2e-3)
     avg = bake(scene, BakeSettings(patch_size=1.0, resolution=64, rotate_hemicube=False,
-                                   corners="average", output="vertices"))
+                                   corners="average", output_mode="vertices"))
     assert avg.corner_colours[corner].min() > 1.5 * 0.5 * 2.0 * F_CORNER_UNIT
 
 
