@@ -53,7 +53,8 @@ class VIEW3D_PT_radiosity(bpy.types.Panel):
         props = context.scene.radiosity
         _split_row(layout, "Output").prop(props, "output_mode", text="")
         col = layout.column(align=True)
-        col.prop(props, "patch_size")
+        col.prop(props, "patch_size", text="Patch Size (auto)" if props.patch_size == 0
+                 else "Patch Size")
         sub = col.column(align=True)
         sub.active = props.output_mode == "MESH"
         sub.prop(props, "contrast")
@@ -152,6 +153,12 @@ def summary_lines(text):
     residual = report.get("residual")
     res_text = f", residual {residual:.2g}" if isinstance(residual, (int, float)) else ""
     lines.append((f"Iterations: {report.get('iterations', '?')}{res_text}", "NONE"))
+    written = report.get("output_objects")
+    if written:          # radiosity mesh output: what the user's faces became
+        faces_in = sum(o.get("input_faces", 0) for o in written)
+        verts = sum(o.get("output_vertices", 0) for o in written)
+        faces = sum(o.get("output_faces", 0) for o in written)
+        lines.append((f"Mesh: {faces_in} faces -> {faces} ({verts} vertices)", "NONE"))
     known = dict(STAGE_LABELS)
     for key, label in STAGE_LABELS[1:]:
         if key in timings:

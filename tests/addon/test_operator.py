@@ -730,3 +730,17 @@ def _modal(me, event):
     me._finish = cls._finish.__get__(me)
     me._report_result = cls._report_result.__get__(me)
     return cls.modal(me, bpy.context, event)
+
+
+def test_summary_lines_say_what_the_mesh_output_wrote():
+    # The radiosity mesh output: the user's faces and what they became, summed over objects.
+    report = {"patches": 5, "iterations": 1, "timings": {"total": 1.0},
+              "output_objects": [dict(object="Floor", input_faces=1, output_vertices=200,
+                                      output_faces=276),
+                                 dict(object="Wall", input_faces=2, output_vertices=21,
+                                      output_faces=24)]}
+    lines = [t for t, _ in PACKAGE.radiosity_addon.panels.summary_lines(json.dumps(report))]
+    assert "Mesh: 3 faces -> 300 (221 vertices)" in lines
+    del report["output_objects"]           # Existing Vertices: nothing about a mesh
+    lines = [t for t, _ in PACKAGE.radiosity_addon.panels.summary_lines(json.dumps(report))]
+    assert not any(t.startswith("Mesh:") for t in lines)
