@@ -296,4 +296,5 @@ def test_readme_caption_states_the_samples_own_settings(package):
     resolution = int(re.search(r"hemicube R = (\d+)", caption).group(1))
     assert resolution == bpy.context.scene.radiosity.resolution
     assert bpy.context.scene.radiosity.corners == "GATHER" and "gathered at every vertex" in caption
+    assert bpy.context.scene.radiosity.output_mode == "MESH" and "radiosity mesh" in caption
     assert not re.search(r"\d[\d,]* (patches|receiver elements)", caption), caption
