@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .contacts import find_contacts, split_at_contacts
+from .duplicates import duplicate_warning, fill_duplicate_colours, merge_duplicates
 from .patches import make_patches, subdivide_patches
 from .pipeline import check_result, colours, form_factors, make_gather, node_arrays, solve
 from .progress import Monitor
@@ -107,6 +108,7 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     level_monitor.stage(*_STAGES["patches"])
     level_monitor.update(0.0, "patches")
     t0 = time.perf_counter()
+    scene = merge_duplicates(scene)      # stability (issue 11): coincident faces solved as one
     patches = make_patches(scene, settings.patch_size)
     contacts = on_contact = None
     if settings.contact_cuts:
@@ -259,11 +261,13 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     if settings.corners == "gather" and gather is None:
         gather = make_gather(scene, patches, sol.node_radiance, settings, monitor, on_contact)
     corner, element_report = colours(scene, patches, sol.node_radiance, settings, gather)
+    corner = fill_duplicate_colours(scene, corner)       # stability (issue 11)
     timings["colours"] = time.perf_counter() - t0
     monitor.update(1.0, "done")
     timings["total"] = time.perf_counter() - t_start
 
     checks, energy, n_dropped = check_result(scene, patches, sol)
+    checks += [w for w in [duplicate_warning(scene)] if w]   # stability (issue 11)
     report = dict(
         patches=P,
         nodes_active=int(np.count_nonzero(sol.active)),

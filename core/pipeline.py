@@ -364,7 +364,7 @@ def colours(scene, patches, node_radiance, settings, gather):
 def check_result(scene, patches, sol):
     """Warnings about the scene and the energy balance, and the balance in watts (dict)."""
     warnings = []
-    n_dropped = int(np.count_nonzero(~np.asarray(scene.face_valid)))
+    n_dropped = scene.faces_dropped           # degenerate only (duplicates: core.duplicates)
     if n_dropped:
         warnings.append(f"{n_dropped} degenerate faces (zero area) were dropped")
     n_back = faces_lit_from_behind(patches, sol.incident, scene.emission)
