@@ -230,7 +230,8 @@ def solve(ff, nodes, settings, monitor):
     if not sol.result.converged:
         r = sol.result
         warnings.append(f"solver '{r.solver}' stopped after {r.iterations} iterations at "
-                        f"residual {r.residual:.3g} > tolerance {settings.tolerance:g}")
+                        f"residual {r.residual:.3g} > tolerance {settings.tolerance:g} x (1 - max "
+                        "reflectance)")
     return dataclasses.replace(sol, warnings=warnings + sol.warnings)
 
 
