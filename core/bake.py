@@ -22,6 +22,7 @@ import numpy as np
 
 from .contacts import find_contacts, split_at_contacts
 from .duplicates import duplicate_warning, fill_duplicate_colours, merge_duplicates
+from .orient import orient
 from .patches import make_patches, subdivide_patches
 from .pipeline import check_result, colours, form_factors, make_gather, node_arrays, solve
 from .progress import Monitor
@@ -78,6 +79,7 @@ class _State:
     active: np.ndarray
     gather: object = None         # core.pipeline.Gather, or None
     on_contact: np.ndarray = None  # (V,) bool: vertices on a contact line, gathered per corner
+    flipped: np.ndarray = None    # (F,) bool: faces baked on their back side (core.orient)
 
 
 def bake(scene, settings=None, *, progress=None, cancel=None):
@@ -257,17 +259,30 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     monitor.stage(*_STAGES["colours"])
     monitor.update(0.0, "colours")
     t0 = time.perf_counter()
+    # stability (issue 11): each face is baked on the side that receives the light (core.orient)
+    side = orient(scene, patches, sol.incident, settings.two_sided,
+                  kept.flipped if kept is not None else None, ff.store.row_sums)
+    room_side = side.room_side(sol.node_radiance)
     gather = kept.gather if kept is not None else None
-    if settings.corners == "gather" and gather is None:
-        gather = make_gather(scene, patches, sol.node_radiance, settings, monitor, on_contact)
-    corner, element_report = colours(scene, patches, sol.node_radiance, settings, gather)
+    if settings.corners == "gather":
+        if gather is None:
+            gather = make_gather(side.scene, patches, sol.node_radiance, settings, monitor,
+                                 on_contact)
+        corner, element_report = colours(side.scene, patches, sol.node_radiance, settings,
+                                         gather)
+    else:
+        corner, element_report = colours(side.scene, side.patches,
+                                         np.concatenate([room_side, sol.node_radiance[P:]]),
+                                         settings, gather)
     corner = fill_duplicate_colours(scene, corner)       # stability (issue 11)
     timings["colours"] = time.perf_counter() - t0
     monitor.update(1.0, "done")
     timings["total"] = time.perf_counter() - t_start
 
     checks, energy, n_dropped = check_result(scene, patches, sol)
-    checks += [w for w in [duplicate_warning(scene)] if w]   # stability (issue 11)
+    if side.flipped.any():   # stability (issue 11): the flipped faces are baked on the lit side
+        checks = [w for w in checks if not w.endswith("on their back side: check normals")]
+    checks += [w for w in [duplicate_warning(scene), side.warning()] if w]
     report = dict(
         patches=P,
         nodes_active=int(np.count_nonzero(sol.active)),
@@ -286,6 +301,7 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     )
     if element_report is not None:
         report["elements"] = element_report
-    state = _State(scene, settings, patches, sol.store, ff.active, gather, on_contact)
-    patch_radiance = sol.node_radiance[:P].copy()
+    state = _State(scene, settings, patches, sol.store, ff.active, gather, on_contact,
+                   side.flipped)
+    patch_radiance = room_side.copy()
     return BakeResult(corner, patch_radiance, sol.node_radiance, patches, report, state)
