@@ -19,9 +19,9 @@ from core.settings import BakeSettings
 AREA_RTOL = 1e-9
 
 #: Furnace: every enclosed front patch reads Le / (1 - rho) within this fraction. The
-#: hemicube's row sums are 1 in a closed scene and reciprocity is enforced, so what remains is
-#: the hemicube's aliasing of the many small contact pieces.
-FURNACE_RTOL = 0.02
+#: hemicube's row sums are 1 in a closed scene, so what remains is the solver tolerance and
+#: float32 rows (measured: 1.5e-4 at most over the placements, 953 patches).
+FURNACE_RTOL = 1e-3
 
 
 def _box(lo, hi):
