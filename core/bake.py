@@ -24,6 +24,8 @@ from .adaptive import coarse_patch_size, mesh_colours
 from .colours import corner_colours
 from .contacts import find_contacts, split_at_contacts
 from .criteria import face_variation, unlit_late_nodes
+from .duplicates import duplicate_warning, fill_duplicate_colours, merge_duplicates
+from .orient import orient
 from .patches import make_patches, subdivide_patches
 from .pipeline import check_result, colours, form_factors, make_gather, node_arrays, solve
 from .progress import Monitor
@@ -86,6 +88,7 @@ class _State:
     gather: object = None         # core.pipeline.Gather, core.adaptive.AdaptiveState or None
     on_contact: np.ndarray = None  # (V,) bool: vertices on a contact line, gathered per corner
     contact_lines: object = None  # core.contacts.Contacts ('mesh' output), or None
+    flipped: np.ndarray = None    # (F,) bool: faces baked on their back side (core.orient)
 
 
 def bake(scene, settings=None, *, progress=None, cancel=None):
@@ -119,6 +122,7 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     level_monitor.stage(*_STAGES["patches"])
     level_monitor.update(0.0, "patches")
     t0 = time.perf_counter()
+    scene = merge_duplicates(scene)      # stability (issue 11): coincident faces solved as one
     patches = make_patches(scene, settings.patch_size)
     contacts = on_contact = found = None
     if settings.contact_cuts:
@@ -232,7 +236,8 @@ def relight(result, *, reflectance=None, emission=None, progress=None, cancel=No
         monitor.update(1.0, "patches")
         return _run(new_scene, state.settings, state.patches, monitor, t_start=t_start,
                     timings={"patches": 0.0}, on_contact=state.on_contact,
-                    contact_lines=state.contact_lines, warnings=["relight: the bake kept no form factors (matrix-free "
+                    contact_lines=state.contact_lines,
+                    warnings=["relight: the bake kept no form factors (matrix-free "
                               "progressive): they were recomputed"])
     return _run(new_scene, state.settings, state.patches, monitor, t_start=t_start,
                 timings={"patches": 0.0}, kept=state, on_contact=state.on_contact,
@@ -275,24 +280,41 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     monitor.stage(*_STAGES["colours"])
     monitor.update(0.0, "colours")
     t0 = time.perf_counter()
+    # stability (issue 11): each face is baked on the side that receives the light (core.orient)
+    side = orient(scene, patches, sol.incident, settings.two_sided,
+                  kept.flipped if kept is not None else None, ff.store.row_sums)
+    room_side = side.room_side(sol.node_radiance)
     gather = kept.gather if kept is not None else None
     mesh = mesh_report = None
     if settings.output_mode == "mesh":
+        # The radiosity mesh bakes the side the normal points to (orientation: 'vertices' only,
+        # the element tree takes its normals from the patches' corners).
+        side = orient(scene, patches, sol.incident, False)
+        room_side = side.room_side(sol.node_radiance)
         corner, mesh, gather, mesh_report = mesh_colours(
             scene, settings, patches, sol.node_radiance, sol.incident, gather, contact_lines,
             monitor, lambda: corner_colours(scene, patches, sol.node_radiance[:P],
                                             crease_angle=settings.crease_angle))
         element_report = mesh_report.pop("elements", None)
-    else:
-        if settings.corners == "gather" and gather is None:
-            gather = make_gather(scene, patches, sol.node_radiance, settings, monitor,
+    elif settings.corners == "gather":
+        if gather is None:
+            gather = make_gather(side.scene, patches, sol.node_radiance, settings, monitor,
                                  on_contact)
-        corner, element_report = colours(scene, patches, sol.node_radiance, settings, gather)
+        corner, element_report = colours(side.scene, patches, sol.node_radiance, settings,
+                                         gather)
+    else:
+        corner, element_report = colours(side.scene, side.patches,
+                                         np.concatenate([room_side, sol.node_radiance[P:]]),
+                                         settings, gather)
+    corner = fill_duplicate_colours(scene, corner)       # stability (issue 11)
     timings["colours"] = time.perf_counter() - t0
     monitor.update(1.0, "done")
     timings["total"] = time.perf_counter() - t_start
 
     checks, energy, n_dropped = check_result(scene, patches, sol)
+    if side.flipped.any():   # stability (issue 11): the flipped faces are baked on the lit side
+        checks = [w for w in checks if not w.endswith("on their back side: check normals")]
+    checks += [w for w in [duplicate_warning(scene), side.warning()] if w]
     report = dict(
         patches=P,
         nodes_active=int(np.count_nonzero(sol.active)),
@@ -311,13 +333,13 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     )
     if element_report is not None:
         report["elements"] = element_report
-    patch_radiance = sol.node_radiance[:P].copy()
+    patch_radiance = room_side.copy()
     if mesh_report is not None:
         report["mesh"] = mesh_report
     else:
         report["face_variation"] = face_variation(scene, patches, patch_radiance,
                                                   settings.contrast)
     state = _State(scene, settings, patches, sol.store, ff.active, gather, on_contact,
-                   contact_lines)
+                   contact_lines, side.flipped)
     return BakeResult(corner, patch_radiance, sol.node_radiance, patches, report, state,
                       output=mesh)

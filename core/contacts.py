@@ -35,6 +35,10 @@ from .patches import Patches, assemble_patches, material_table, triangle_mask
 #: nothing but costs a hemicube.
 MIN_PIECE = 0.02
 
+#: Corners nearer a cut line than this fraction of the patch size count as on the line:
+#: a crossing point computed beside such a corner could round onto it.
+SNAP = 1e-9
+
 #: Most cuts applied to one original patch (a patch under a chair leg meets 4 lines).
 MAX_CUTS = 8
 
@@ -314,15 +318,26 @@ def _canonical_first(p, q):
             | ((p[:, 1] == q[:, 1]) & (p[:, 2] < q[:, 2])))))
 
 
-def _cut(corners, k, a, w):
+def _cut(corners, k, a, w, size):
     """Cut patches by lines; returns the pieces' corners (m, 4, 3), their count per patch.
 
     Every patch gives two convex polygons (one per side), each with 3 to 5 corners; a pentagon
     becomes a quad and a triangle. Crossing points are computed from the edge's endpoints in a
     canonical order, so the two patches sharing an edge place bit-identical points on it.
+
+    Corners within ``SNAP x size`` of the line count as on it (no crossing point is made next to
+    them, which rounding could put on the corner itself), and a patch the line does not cross
+    by more than ``MIN_PIECE x size`` on both sides is returned whole: no piece can be
+    degenerate (every piece has a corner at least ``MIN_PIECE x size`` from the line and two
+    distinct points on it).
     """
     n = corners.shape[0]
     h = np.einsum("ikj,ij->ik", corners - a[:, None, :], w)
+    h = np.where(np.abs(h) <= SNAP * size[:, None], 0.0, h)
+    slot_ok = np.arange(4)[None, :] < k[:, None]
+    margin = MIN_PIECE * size
+    crossed = ((np.where(slot_ok, h, -np.inf).max(axis=1) > margin)
+               & (np.where(slot_ok, h, np.inf).min(axis=1) < -margin))
     slot = np.arange(4)[None, :]
     nxt = (slot + 1) % k[:, None]
     v = corners
@@ -352,6 +367,8 @@ def _cut(corners, k, a, w):
         keep += [np.ones(n, dtype=bool), m == 5]
     pieces = np.stack(pieces, axis=1)          # (n, 4, 4, 3): +main, +extra, -main, -extra
     keep = np.stack(keep, axis=1)              # (n, 4)
+    pieces[~crossed, 0] = corners[~crossed]
+    keep[~crossed] = [True, False, False, False]
     return pieces[keep], keep.sum(axis=1)
 
 
@@ -408,7 +425,10 @@ def split_at_contacts(scene, patches, contacts=None, *, tol=None):
         now = np.zeros(pair_p.size, dtype=bool)
         now[first] = True
         k = np.where(triangle_mask(corners), 3, 4)
-        pieces, n_pieces = _cut(corners[uniq], k[uniq], a[now], w[now])
+        # np.unique's first occurrences are in patch order, which the pending rows need not
+        # be (children of different patches interleave): index the lines by ``first``.
+        size_u = np.sqrt(newell_normals_areas(corners[uniq])[1])
+        pieces, n_pieces = _cut(corners[uniq], k[uniq], a[first], w[first], size_u)
         info["cuts"] += int(uniq.size)
         n_child = np.ones(P, dtype=np.int64)
         n_child[uniq] = n_pieces

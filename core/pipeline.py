@@ -236,7 +236,8 @@ def solve(ff, nodes, settings, monitor):
     if not sol.result.converged:
         r = sol.result
         warnings.append(f"solver '{r.solver}' stopped after {r.iterations} iterations at "
-                        f"residual {r.residual:.3g} > tolerance {settings.tolerance:g}")
+                        f"residual {r.residual:.3g} > tolerance {settings.tolerance:g} x (1 - max "
+                        "reflectance)")
     return dataclasses.replace(sol, warnings=warnings + sol.warnings)
 
 
@@ -370,7 +371,7 @@ def colours(scene, patches, node_radiance, settings, gather):
 def check_result(scene, patches, sol):
     """Warnings about the scene and the energy balance, and the balance in watts (dict)."""
     warnings = []
-    n_dropped = int(np.count_nonzero(~np.asarray(scene.face_valid)))
+    n_dropped = scene.faces_dropped           # degenerate only (duplicates: core.duplicates)
     if n_dropped:
         warnings.append(f"{n_dropped} degenerate faces (zero area) were dropped")
     n_back = faces_lit_from_behind(patches, sol.incident, scene.emission)

@@ -44,6 +44,9 @@ class Scene:
         The back side's material (see docs/design.md, "Two sides"); None: the same as the front,
         which is Cycles' behaviour for surfaces and mesh lights. An area light is one-sided: its
         back is black (reflectance 0, emission 0).
+    face_duplicate_of : (F,) int64 or None
+        Set by :func:`core.duplicates.merge_duplicates`: the kept face each coincident duplicate
+        (marked invalid) stands for, -1 for other faces. None: not checked.
     """
 
     vertices: np.ndarray
@@ -61,6 +64,7 @@ class Scene:
     face_valid: np.ndarray
     back_reflectance: np.ndarray = None
     back_emission: np.ndarray = None
+    face_duplicate_of: np.ndarray = None
 
     def back_materials(self):
         """(reflectance, emission) of the back sides, (M, 3) each."""
@@ -79,7 +83,10 @@ class Scene:
     @property
     def faces_dropped(self):
         """Number of faces dropped as degenerate."""
-        return int(np.count_nonzero(~self.face_valid))
+        dropped = ~np.asarray(self.face_valid)
+        if self.face_duplicate_of is not None:
+            dropped &= np.asarray(self.face_duplicate_of) < 0
+        return int(np.count_nonzero(dropped))
 
     def face_corner_indices(self):
         """Corner indices of every face, flattened in face order, and the face of each.

@@ -1,0 +1,142 @@
+"""Coincident duplicate faces: detected, solved as one surface, reported by name.
+
+A face left twice in an imported file (a floor duplicated in place, or duplicated and flipped)
+is two surfaces at the same place. Solved as two, each copy sees the other at zero distance:
+the reciprocity step shares the floor's light between the copies and the whole room darkens
+(about 15 % for a duplicated floor), while Cycles shows one surface.
+
+Two valid faces are duplicates when they have the same number of corners, lie in the same plane
+(normals parallel or opposite), and every corner of one lies within ``DUPLICATE_RTOL`` x the
+face size (sqrt of its area) of a corner of the other. Of each group of duplicates the face with
+the lowest index is kept; the others are marked invalid (:attr:`Scene.face_valid`) with
+:attr:`Scene.face_duplicate_of` naming the kept face, so they make no patches and nothing sees
+them; after the solve their corners take the colours of the kept face's corners at the same
+places (:func:`fill_duplicate_colours`), and the report warns (:func:`duplicate_warning`).
+"""
+
+import dataclasses
+
+import numpy as np
+
+from .constants import tol
+from .contacts import _box_pairs
+from .geometry import ragged
+
+#: Corners of two duplicate faces coincide within this fraction of the face size (sqrt area).
+DUPLICATE_RTOL = 1e-4
+
+#: Objects named in the warning at most (then "and N more").
+MAX_NAMED = 5
+
+
+def _face_corners(scene, faces):
+    """Corner positions (n, k, 3) of faces that all have k corners."""
+    k = int(scene.face_sizes[faces[0]])
+    idx = scene.face_starts[faces][:, None] + np.arange(k)[None, :]
+    return scene.vertices[scene.corner_verts[idx]]
+
+
+def find_duplicates(scene, *, rtol=DUPLICATE_RTOL):
+    """(F,) int64: for every face, the face it duplicates (lowest index of its group), else -1.
+
+    Parameters
+    ----------
+    scene : core.scene.Scene
+    rtol : float
+        Corner distance, as a fraction of the face size, within which corners coincide.
+
+    Returns
+    -------
+    duplicate_of : (F,) int64
+        -1 for faces kept (and faces with no duplicate); the kept face's index otherwise.
+    """
+    F = scene.n_faces
+    duplicate_of = np.full(F, -1, dtype=np.int64)
+    valid = np.flatnonzero(scene.face_valid)
+    if valid.size < 2:
+        return duplicate_of
+    owner, _, starts = ragged(scene.face_sizes[valid])
+    corners, _ = scene.face_corner_indices()
+    first = np.cumsum(scene.face_sizes) - scene.face_sizes
+    pos_all = scene.vertices[scene.corner_verts[corners]]
+    centroid = (np.add.reduceat(pos_all, first, axis=0) / scene.face_sizes[:, None])[valid]
+    size = np.sqrt(scene.face_areas[valid])
+    reach = rtol * size
+    extent = np.ptp(centroid, axis=0).max() if valid.size else 0.0
+    cell = max(2.0 * float(reach.max()), extent / 2.0**20, np.finfo(float).tiny)
+    lo, hi = centroid - reach[:, None], centroid + reach[:, None]
+    i, j = _box_pairs(lo, hi, lo, hi, cell)
+    keep = i < j
+    i, j = i[keep], j[keep]
+    fi, fj = valid[i], valid[j]
+    ok = scene.face_sizes[fi] == scene.face_sizes[fj]
+    cos = np.abs(np.einsum("ij,ij->i", scene.face_normals[fi], scene.face_normals[fj]))
+    ok &= cos >= tol.parallel_cos
+    ok &= np.abs(size[i] - size[j]) <= np.minimum(reach[i], reach[j])
+    fi, fj, r = fi[ok], fj[ok], np.minimum(reach[i], reach[j])[ok]
+    match = np.zeros(fi.size, dtype=bool)
+    for k in np.unique(scene.face_sizes[fi]):       # one pass per corner count, not per pair
+        rows = np.flatnonzero(scene.face_sizes[fi] == k)
+        a, b = _face_corners(scene, fi[rows]), _face_corners(scene, fj[rows])
+        d = np.linalg.norm(a[:, :, None, :] - b[:, None, :, :], axis=3)      # (n, k, k)
+        match[rows] = ((d.min(axis=2).max(axis=1) <= r[rows])
+                       & (d.min(axis=1).max(axis=1) <= r[rows]))
+    fi, fj = fi[match], fj[match]
+    root = np.arange(F, dtype=np.int64)
+    np.minimum.at(root, fj, fi)
+    while True:                                     # point every face at its group's lowest
+        nxt = root[root]
+        if np.array_equal(nxt, root):
+            break
+        root = nxt
+    dup = root != np.arange(F)
+    duplicate_of[dup] = root[dup]
+    return duplicate_of
+
+
+def merge_duplicates(scene, *, rtol=DUPLICATE_RTOL):
+    """The scene with its duplicate faces marked invalid and ``face_duplicate_of`` set.
+
+    Returns ``scene`` itself when it has no duplicates.
+    """
+    duplicate_of = find_duplicates(scene, rtol=rtol)
+    dup = duplicate_of >= 0
+    if not dup.any():
+        return scene
+    valid = np.asarray(scene.face_valid) & ~dup
+    valid.setflags(write=False)
+    duplicate_of.setflags(write=False)
+    return dataclasses.replace(scene, face_valid=valid, face_duplicate_of=duplicate_of)
+
+
+def fill_duplicate_colours(scene, corner_colours):
+    """Corner colours (C, 3) with every duplicate's corners given the kept face's colours at
+    the same places (nearest corner of the kept face)."""
+    dup_of = scene.face_duplicate_of
+    if dup_of is None or not np.any(dup_of >= 0):
+        return corner_colours
+    out = np.array(corner_colours, copy=True)
+    dups = np.flatnonzero(dup_of >= 0)
+    for k in np.unique(scene.face_sizes[dups]):
+        f = dups[scene.face_sizes[dups] == k]
+        g = dup_of[f]
+        a, b = _face_corners(scene, f), _face_corners(scene, g)
+        nearest = np.argmin(np.linalg.norm(a[:, :, None, :] - b[:, None, :, :], axis=3), axis=2)
+        src = scene.face_starts[g][:, None] + nearest
+        dst = scene.face_starts[f][:, None] + np.arange(k)[None, :]
+        out[dst.ravel()] = out[src.ravel()]
+    return out
+
+
+def duplicate_warning(scene):
+    """The report's warning naming the objects with duplicate faces, or None."""
+    dup_of = scene.face_duplicate_of
+    if dup_of is None or not np.any(dup_of >= 0):
+        return None
+    dups = np.flatnonzero(dup_of >= 0)
+    objs = np.unique(np.concatenate([scene.face_objects[dups], scene.face_objects[dup_of[dups]]]))
+    names = [f'"{scene.object_names[o]}"' for o in objs[:MAX_NAMED]]
+    more = f" and {objs.size - MAX_NAMED} more" if objs.size > MAX_NAMED else ""
+    return (f"{dups.size} faces coincide with other faces (duplicates, e.g. "
+            f"{scene.face_label(dups[0])} = {scene.face_label(dup_of[dups[0]])}) in objects "
+            f"{', '.join(names)}{more}: each group was solved as one surface")

@@ -1,0 +1,103 @@
+"""Flipped normals (issue 11): every face is baked on the side that receives the light.
+
+Existing Vertices output only (``output_mode='vertices'``): the radiosity mesh bakes the normal's
+side and warns (its element tree takes its normals from the patches' corners).
+
+Oracle (invariance): the same room with some faces reversed (their polygons wound the other
+way, as CAD imports leave them) gives the same colours as the room as modelled, within the
+seed-noise of the rotated hemicubes (the reversed faces' rows are drawn in another order);
+the noise is measured here as the spread between two seeds of the unflipped room. Receiver
+elements (``element_levels``) refine a flipped face's unlit side (core.elements gathers along
+the patch normal), so the invariance is tested without them.
+"""
+
+import numpy as np
+import pytest
+
+from core.bake import bake
+from core.scene import scene_from_polygons
+from core.settings import BakeSettings
+from test_duplicates import _room
+
+#: Flipped vs as modelled: at most this many times the difference between two seeds.
+NOISE_FACTOR = 2.0
+
+
+def _flip(scene, faces):
+    polys = [list(scene.corner_verts[s:s + k]) for s, k in zip(scene.face_starts, scene.face_sizes)]
+    for f in faces:
+        polys[f] = polys[f][::-1]
+    return scene_from_polygons(scene.vertices, polys, scene.face_materials, scene.reflectance,
+                               scene.emission, face_objects=scene.face_objects,
+                               object_names=scene.object_names)
+
+
+def _by_face_vertex(scene, colours):
+    """Corner colours ordered by (face, vertex): independent of each face's winding."""
+    corners, faces = scene.face_corner_indices()
+    order = np.lexsort((scene.corner_verts[corners], faces))
+    return colours[corners[order]]
+
+
+def _by_face_centre(res):
+    """Patch radiance ordered by (face, centre): independent of the patch grid's order."""
+    c = np.round(res.patches.centres, 9)
+    order = np.lexsort((c[:, 2], c[:, 1], c[:, 0], res.patches.face))
+    return res.patch_radiance[order]
+
+
+@pytest.fixture(scope="module")
+def reference():
+    scene = _room()
+    out = {}
+    for corners in ("gather", "average"):
+        runs = [bake(scene, BakeSettings(patch_size=0.5, seed=s, corners=corners,
+                                         element_levels=0, output_mode="vertices"))
+                for s in (7, 8)]
+        out[corners] = (scene, runs)
+    return out
+
+
+# Faces of _room: 0 floor, 1 ceiling, 2-5 walls, 6-11 the box, 12 the lamp.
+@pytest.mark.parametrize("corners", ["gather", "average"])
+@pytest.mark.parametrize("faces", [[0], [0, 3, 7], [1, 2, 4, 5, 8]])
+def test_flipped_faces_bake_like_the_room_as_modelled(reference, corners, faces):
+    scene0, (r0, r1) = reference[corners]
+    scene = _flip(scene0, faces)
+    rf = bake(scene, BakeSettings(patch_size=0.5, seed=7, corners=corners, element_levels=0,
+                                   output_mode="vertices"))
+    c0 = _by_face_vertex(scene0, r0.corner_colours)
+    c1 = _by_face_vertex(scene0, r1.corner_colours)
+    cf = _by_face_vertex(scene, rf.corner_colours)
+    noise = np.abs(c1 - c0).max()
+    assert np.abs(cf - c0).max() <= NOISE_FACTOR * noise
+    p0, p1, pf = _by_face_centre(r0), _by_face_centre(r1), _by_face_centre(rf)
+    assert np.abs(pf - p0).max() <= NOISE_FACTOR * np.abs(p1 - p0).max()
+    for a in (rf.corner_colours, rf.patch_radiance):
+        assert np.isfinite(a).all() and (a >= 0).all()
+    warn = [w for w in rf.report["warnings"] if "back side (flipped normals?)" in w]
+    assert len(warn) == 1 and warn[0].startswith(f"{len(faces)} faces ")
+    for f in faces:
+        assert f'"{scene.object_names[scene.face_objects[f]]}"' in warn[0]
+
+
+def test_lamp_under_the_ceiling_is_not_flipped():
+    """A two-sided lamp 1 cm under the ceiling, reversed (facing up): both its sides meet
+    surfaces, so it is not reported (its own light on the ceiling lights its back)."""
+    scene = _flip(_room(), [12])
+    res = bake(scene, BakeSettings(patch_size=0.5, seed=7, output_mode="vertices"))
+    assert not any("flipped normals" in w for w in res.report["warnings"])
+
+
+def test_emitter_facing_the_void_is_flipped():
+    """An emissive square above an open floor, its front facing up into the void: the side
+    that lights the floor (its back) is baked, and the warning names it."""
+    v = np.array([[0, 0, 0], [2, 0, 0], [2, 2, 0], [0, 2, 0],
+                  [0.5, 0.5, 1], [1.5, 0.5, 1], [1.5, 1.5, 1], [0.5, 1.5, 1]], dtype=float)
+    scene = scene_from_polygons(v, [[0, 1, 2, 3], [4, 5, 6, 7]], [0, 1],
+                                [[0.5] * 3, [0.0] * 3], [[0.0] * 3, [5.0] * 3],
+                                face_objects=[0, 1], object_names=["Floor", "Panel"])
+    res = bake(scene, BakeSettings(patch_size=0.5, output_mode="vertices"))
+    warn = [w for w in res.report["warnings"] if "flipped normals" in w]
+    assert len(warn) == 1 and '"Panel"' in warn[0] and "1 of them emitting" in warn[0]
+    assert '"Floor"' not in warn[0]
