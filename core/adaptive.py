@@ -35,7 +35,7 @@ import numpy as np
 
 from .criteria import (EmitterSamples, contact_edges, contact_points, dark_floor, luminance,
                        per_leaf_scores)
-from .elements import make_elements
+from .elements import bake_elements
 from .gather import NORMAL_DECIMALS, corner_groups, shade
 from .hemicube import point_rows
 from .hierarchy import ElementTree, output_mesh
@@ -265,15 +265,11 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
 
     L = np.asarray(node_radiance, dtype=np.float64)
     P = patches.areas.size
-    elements, seen, seen_L = None, patches, L
+    seen, seen_L = patches, L
     gather_monitor = monitor
-    if settings.element_levels:
-        elements = make_elements(
-            scene, patches, L, levels=settings.element_levels,
-            threshold=settings.element_threshold, crease_angle=settings.crease_angle,
-            resolution=settings.resolution, rotate=settings.rotate_hemicube,
-            rng=np.random.default_rng([settings.seed, 3]),
-            monitor=None if monitor is None else SubMonitor(monitor, 0.0, 0.2))
+    elements = bake_elements(scene, patches, L, settings,
+                             None if monitor is None else SubMonitor(monitor, 0.0, 0.2))
+    if elements is not None:
         seen, seen_L = elements.patches, elements.node_radiance(scene, L)
         gather_monitor = None if monitor is None else SubMonitor(monitor, 0.2, 1.0)
     power = np.asarray(incident)

@@ -152,3 +152,15 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
         store.add_compact(np.arange(start, start + ids.size), cols, vals)
         start += ids.size
     return Elements(elements, parent, computed, store, steps)
+
+
+def bake_elements(scene, patches, node_radiance, settings, monitor=None):
+    """:func:`make_elements` with a bake's settings (``element_levels``, ``element_threshold``,
+    ``crease_angle``, hemicube settings, the seed's element stream); None when levels are 0."""
+    if not settings.element_levels:
+        return None
+    return make_elements(scene, patches, node_radiance, levels=settings.element_levels,
+                         threshold=settings.element_threshold,
+                         crease_angle=settings.crease_angle, resolution=settings.resolution,
+                         rotate=settings.rotate_hemicube,
+                         rng=np.random.default_rng([settings.seed, 3]), monitor=monitor)

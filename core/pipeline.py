@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .colours import corner_colours
-from .elements import make_elements
+from .elements import bake_elements
 from .gather import corner_groups, gather_rows, gathered_colours
 from .progress import SubMonitor
 from .reciprocity import asymmetry, make_reciprocal
@@ -324,16 +324,9 @@ class Gather:
 
 def make_gather(scene, patches, node_radiance, settings, monitor, on_contact=None):
     """Receiver elements (if ``element_levels``) and the gather rows at every corner group."""
-    elements = None
-    seen = patches
-    if settings.element_levels:
-        elements = make_elements(
-            scene, patches, node_radiance, levels=settings.element_levels,
-            threshold=settings.element_threshold, crease_angle=settings.crease_angle,
-            resolution=settings.resolution, rotate=settings.rotate_hemicube,
-            rng=np.random.default_rng([settings.seed, 3]),
-            monitor=SubMonitor(monitor, 0.0, ELEMENT_SHARE))
-        seen = elements.patches
+    elements = bake_elements(scene, patches, node_radiance, settings,
+                             SubMonitor(monitor, 0.0, ELEMENT_SHARE))
+    seen = patches if elements is None else elements.patches
     groups = corner_groups(scene, crease_angle=settings.crease_angle, on_contact=on_contact)
     sub = SubMonitor(monitor, ELEMENT_SHARE if elements is not None else 0.0, 1.0)
     rows = gather_rows(seen, groups, resolution=settings.resolution,
