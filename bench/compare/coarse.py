@@ -236,15 +236,22 @@ def cycles_cached(name, blend, sc, spp, seed, cache, threads):
     return cc, sec, cpu
 
 
+#: Per scene: the generator's size option, its output option and the grid of the pre-meshed copy
+#: in bench/blends (that size is not regenerated: it is the reference's own mesh).
+GENERATORS = {"cornell_box": ("--grid", "--output", 0.05),
+              "office": ("--face-size", "--out", 0.2)}
+
+
 def grid_blend(name, grid, cache):
     """Path of the ``grid``-metre pre-meshed copy (made with .venv-bpy42 if missing)."""
-    if abs(grid - 0.05) < 1e-9:
+    size_opt, out_opt, bench_grid = GENERATORS[name]
+    if abs(grid - bench_grid) < 1e-9:
         return ROOT / "bench" / "blends" / ("%s.blend" % name)
     path = Path(cache) / ("%s_grid%g.blend" % (name, grid))
     if not path.exists():
         script = ROOT / "scripts" / ("make_%s.py" % name)
-        subprocess.run([str(ROOT / ".venv-bpy42" / "bin" / "python"), str(script), "--grid",
-                        str(grid), "--output", str(path)], check=True, cwd=ROOT)
+        subprocess.run([str(ROOT / ".venv-bpy42" / "bin" / "python"), str(script), size_opt,
+                        str(grid), out_opt, str(path)], check=True, cwd=ROOT)
     return path
 
 
@@ -378,12 +385,12 @@ def run(name, args):
         fv = record(dict(method="adaptive", label=label, contrast=kw.get("contrast", ""),
                          min_element=kw.get("min_element", ""), vertices=len(m.vertices),
                          faces=len(m.face_starts), t_total=wall, cpu=cpu, misses=misses), cc)
+        worst, faces = ref.worst(fv), ref.worst_faces(fv, top=8 if not kw else 4)
+        print("    " + worst)
+        for line in faces:
+            print("      " + line)
         if not kw:
-            notes["worst"] = ref.worst(fv)
-            notes["faces"] = ref.worst_faces(fv)
-            print("    " + notes["worst"])
-            for line in notes["faces"]:
-                print("      " + line)
+            notes["worst"], notes["faces"] = worst, faces
             notes["input"] = (len(arrays["face_starts"]), len(arrays["vertices"]))
 
     # Uniform subdivision: pre-meshed copies, colours at their own corners.
@@ -458,6 +465,23 @@ def write_csv(rows, path):
             w.writerow({k: ("%.6g" % v if isinstance(v, float) else v) for k, v in r.items()})
 
 
+def read_csv(path):
+    """Rows of a CSV written by :func:`write_csv` (numbers as float, empty cells dropped)."""
+    rows = []
+    with open(path, newline="") as fh:
+        for r in csv.DictReader(fh):
+            row = {}
+            for k, v in r.items():
+                if v == "":
+                    continue
+                try:
+                    row[k] = float(v)
+                except ValueError:
+                    row[k] = v
+            rows.append(row)
+    return rows
+
+
 STYLE = {"adaptive": ("s", "C0"), "uniform": ("o-", "C1"), "cycles": ("^-", "C2")}
 
 
@@ -486,7 +510,7 @@ def chart(rows, path, title):
             for j, r in enumerate(rs):
                 tag = {"adaptive": r["label"].replace("adaptive ", ""),
                        "uniform": "%g m" % r.get("grid", 0),
-                       "cycles": "%s spp" % r.get("samples")}[method]
+                       "cycles": "%d spp" % int(r.get("samples", 0))}[method]
                 # Adaptive runs often land on one spot: their labels are stacked.
                 dy = 3 - 8 * (j % 4) if method == "adaptive" else 3
                 ax.annotate(tag, (r[key], 100 * r["rms"]), fontsize=6, xytext=(5, dy),
@@ -515,7 +539,7 @@ def chart(rows, path, title):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description="Coarse models: adaptive mesh vs uniform vs Cycles.")
-    ap.add_argument("--scene", default="cornell_box", choices=("cornell_box", "office"))
+    ap.add_argument("--scene", default="cornell_box", choices=sorted(GENERATORS))
     ap.add_argument("--blend-dir", default=str(ROOT / "bench" / "blends"),
                     help="folder of the pre-meshed <scene>.blend (the reference's mesh)")
     ap.add_argument("--coarse-dir", default=str(ROOT / "sample_blends"),
@@ -523,14 +547,24 @@ def main(argv=None):
     ap.add_argument("--reference-seeds", type=int, default=4)
     ap.add_argument("--reference-samples", type=int, default=4096)
     ap.add_argument("--cycles-samples", nargs="*", type=int, default=[64, 256, 1024])
-    ap.add_argument("--grids", nargs="*", type=float, default=[0.2, 0.1, 0.05, 0.025],
-                    help="uniform grid sizes (m); 0.05 is the reference's own mesh")
+    ap.add_argument("--grids", nargs="*", type=float, default=None,
+                    help="uniform grid sizes (m); default Cornell box 0.2 0.1 0.05 0.025 (0.05 is "
+                         "the reference's own mesh), office 0.8 0.4 0.2 (0.2 is)")
     ap.add_argument("--contrasts", nargs="*", type=float, default=[0.05, 0.2])
     ap.add_argument("--min-elements", nargs="*", type=float, default=[0.1, 0.025])
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--cache", default=str(ROOT / "bench" / "results" / "cache"))
     ap.add_argument("--out", default=str(ROOT / "bench" / "results"))
+    ap.add_argument("--chart-only", action="store_true",
+                    help="redraw the chart from the CSV of a previous run (no bake)")
     args = ap.parse_args(argv)
+    base = Path(args.out) / ("%s_coarse" % args.scene)
+    title = "%s, coarse model: error against vertices and time" % args.scene
+    if args.chart_only:
+        chart(read_csv(base.with_suffix(".csv")), base.with_suffix(".png"), title)
+        return
+    if args.grids is None:
+        args.grids = {"cornell_box": [0.2, 0.1, 0.05, 0.025], "office": [0.8, 0.4, 0.2]}[args.scene]
     if args.reference_seeds < 2:
         ap.error("--reference-seeds must be >= 2 (the reference's noise comes from their spread)")
     if args.reference_samples in args.cycles_samples:
@@ -542,10 +576,8 @@ def main(argv=None):
     Path(args.cache).mkdir(parents=True, exist_ok=True)
     Path(args.out).mkdir(parents=True, exist_ok=True)
     rows, notes = run(args.scene, args)
-    base = Path(args.out) / ("%s_coarse" % args.scene)
     write_csv(rows, base.with_suffix(".csv"))
-    chart(rows, base.with_suffix(".png"), "%s, coarse model: error against vertices and time"
-          % args.scene)
+    chart(rows, base.with_suffix(".png"), title)
     for key, what in (("rms", "all faces"), ("rms_rest", "without each run's %d worst faces"
                                                  % WORST)):
         s = summary(rows, key)
