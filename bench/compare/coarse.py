@@ -308,14 +308,14 @@ class Reference:
         pos = a["vertices"][a["corner_verts"]]
         centre = np.stack([np.bincount(face, weights=pos[:, k]) for k in range(3)], 1)
         centre /= a["face_sizes"][:, None]
-        lt, lr = metrics.luminance(fv), metrics.luminance(self.ref_faces)
+        lr = metrics.luminance(self.ref_faces)
         mean = np.sum(ww * lr[idx])
         lines = []
         for k in np.argsort(-ww * rel ** 2)[:top]:
             f = idx[k]
-            lines.append("%s face %d at (%.3f, %.3f, %.3f): reference %.3f x the mean, ours %+.0f %%"
-                         % (self.names[a["face_objects"][f]], f, *centre[f], lr[f] / mean,
-                            100 * rel[k]))
+            lines.append("%s face %d at (%.3f, %.3f, %.3f): reference %.3f x the mean, "
+                         "ours %+.0f %%" % (self.names[a["face_objects"][f]], f, *centre[f],
+                                            lr[f] / mean, 100 * rel[k]))
         return lines
 
     def worst(self, fv, top=20):
@@ -564,7 +564,7 @@ def main(argv=None):
         chart(read_csv(base.with_suffix(".csv")), base.with_suffix(".png"), title)
         return
     if args.grids is None:
-        args.grids = {"cornell_box": [0.2, 0.1, 0.05, 0.025], "office": [0.8, 0.4, 0.2]}[args.scene]
+        args.grids = dict(cornell_box=[0.2, 0.1, 0.05, 0.025], office=[0.8, 0.4, 0.2])[args.scene]
     if args.reference_seeds < 2:
         ap.error("--reference-seeds must be >= 2 (the reference's noise comes from their spread)")
     if args.reference_samples in args.cycles_samples:
