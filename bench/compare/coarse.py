@@ -502,7 +502,7 @@ def chart(rows, path, title):
                 continue
             name = {"adaptive": "adaptive mesh (coarse model)",
                     "uniform": "ours, uniform grid (Existing Vertices)",
-                    "cycles": "Cycles, 5 cm grid"}[method]
+                    "cycles": "Cycles, pre-meshed copy"}[method]
             ax.plot([r[key] for r in rs], [100 * r["rms"] for r in rs], style, color=colour,
                     label=name, ms=6)
             ax.plot([r[key] for r in rs], [100 * r["rms_rest"] for r in rs], style[0],
@@ -588,8 +588,8 @@ def main(argv=None):
         print("  uniform at equal error: %.0f vertices (%s), %.1f s; adaptive/uniform vertices "
               "%.0f %%" % (s["uniform_vertices"], s["uniform_how"], s["uniform_seconds"],
                            100 * s["ratio"]))
-        print("  Cycles (5 cm copy) at equal error: %.1f s (%s); adaptive time / Cycles time %.2f"
-              % (s["cycles_seconds"], s["cycles_how"], 1.0 / s["speedup"]))
+        print("  Cycles (pre-meshed copy) at equal error: %.1f s (%s); adaptive time / Cycles "
+              "time %.2f" % (s["cycles_seconds"], s["cycles_how"], 1.0 / s["speedup"]))
     print("worst faces at defaults: " + notes["worst"])
     for line in notes["faces"]:
         print("  " + line)
