@@ -27,6 +27,24 @@ CONTACT_ELEMENT = 0.25
 #: points in chunks of this many (point, line) pairs.
 PAIR_CHUNK = 2_000_000
 
+#: Solve patches near an emitter are split until their size is at most this many times their
+#: distance to it (and emitter patches likewise towards the surfaces near them): a hemicube
+#: treats its source patch as a point, which is wrong for two surfaces nearer than about a patch
+#: size, and near an emitter that error carries most of the energy. Measured on the office
+#: modelled coarsely (luminaires hung 5 cm under the ceiling), uniform patches: 0.8 m +24 %,
+#: 0.4 m +10.6 %, 0.2 m +0.7 % too bright against converged Cycles (bench/compare/coarse.py).
+NEAR_EMITTER_FACTOR = 4.0
+
+#: At most this many rounds of near-emitter splitting (a 1 m patch down to 1/8 m).
+NEAR_EMITTER_LEVELS = 3
+
+#: (patch, emitter patch) pairs measured per chunk.
+NEAR_CHUNK = 4_000_000
+
+#: Two patches whose centres lie within this fraction of their radius from each other's plane
+#: are coplanar for the near-emitter test.
+COPLANAR = 1e-3
+
 
 def luminance(rgb):
     """(n,) luminance of (n, 3) scene-linear RGB."""
@@ -236,3 +254,52 @@ def per_leaf_scores(tree, conf, corner_y, corner_vis, corner_alone, emitting_lea
     score[size < 2.0 * settings.min_element] = 0.0
     return score, dict(contrast=int(np.count_nonzero(diff > settings.contrast)),
                        shadow=int(np.count_nonzero(shadow)), contact=int(np.count_nonzero(contact)))
+
+
+def near_emitter_mask(patches, emitting, *, factor=NEAR_EMITTER_FACTOR, min_size=0.0):
+    """Patches too large for their distance to an emitter, and emitters too large for theirs.
+
+    The distance between two patches is bounded below by the gap between their bounding
+    spheres and by the distance of each centre from the other's plane; patch p (size s_p, the
+    longest edge) is marked when ``s_p > factor * d`` for some pair (p, e) with e emitting
+    (and e when ``s_e > factor * d``), never below ``min_size``.
+
+    Parameters
+    ----------
+    patches : core.patches.Patches
+    emitting : (P,) bool
+    factor : float
+    min_size : float
+        Patches no larger than this are never marked (m).
+
+    Returns
+    -------
+    (P,) bool
+    """
+    emitting = np.asarray(emitting, dtype=bool)
+    P = patches.areas.size
+    mask = np.zeros(P, dtype=bool)
+    src = np.flatnonzero(emitting)
+    if src.size == 0 or P == 0:
+        return mask
+    corners = patches.corners
+    centres, normals = patches.centres, patches.normals
+    radius = np.linalg.norm(corners - centres[:, None, :], axis=2).max(axis=1)
+    size = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    step = max(1, NEAR_CHUNK // P)
+    for lo in range(0, src.size, step):
+        e = src[lo:lo + step]
+        d = centres[None, :, :] - centres[e, None, :]                     # (E, P, 3)
+        sphere = np.linalg.norm(d, axis=2) - radius[None, :] - radius[e, None]
+        plane_e = np.abs(np.einsum("epk,ek->ep", d, normals[e]))          # p from e's plane
+        plane_p = np.abs(np.einsum("epk,pk->ep", d, normals))             # e from p's plane
+        gap = np.maximum(sphere, np.maximum(plane_e, plane_p))
+        # Coplanar patches exchange nothing (a ceiling around a flush panel); emitters are
+        # measured against the surfaces around them, not against each other.
+        flat = (plane_e <= COPLANAR * radius[e, None]) & (plane_p <= COPLANAR * radius[None, :])
+        gap[flat] = np.inf
+        gap[:, emitting] = np.inf
+        near = gap * factor
+        mask |= np.any(size[None, :] > near, axis=0)
+        mask[e] |= np.any((size[e, None] > near) & ~emitting[None, :], axis=1)
+    return mask & (size > min_size)
