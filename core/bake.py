@@ -23,8 +23,7 @@ import numpy as np
 from .adaptive import coarse_patch_size, mesh_colours
 from .colours import corner_colours
 from .contacts import find_contacts, split_at_contacts
-from .criteria import (NEAR_EMITTER_LEVELS, face_variation, near_emitter_mask,
-                       unlit_late_nodes)
+from .criteria import face_variation, near_emitter_mask, unlit_late_nodes
 from .duplicates import duplicate_warning, fill_duplicate_colours, merge_duplicates
 from .orient import orient
 from .patches import make_patches, subdivide_patches
@@ -126,7 +125,8 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     scene = merge_duplicates(scene)      # stability (issue 11): coincident faces solved as one
     patches = make_patches(scene, settings.patch_size)
     if settings.output_mode == "mesh":
-        patches = _split_near_emitters(scene, patches, settings.min_element)
+        patches = _split_near_emitters(scene, patches, settings.min_element,
+                                       settings.emitter_levels)
     contacts = on_contact = found = None
     if settings.contact_cuts:
         found = find_contacts(scene, patches)
@@ -145,9 +145,9 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     return result
 
 
-def _split_near_emitters(scene, patches, min_size):
+def _split_near_emitters(scene, patches, min_size, levels):
     """Solve patches split where they are too large for their distance to an emitter."""
-    for _ in range(NEAR_EMITTER_LEVELS):
+    for _ in range(levels):
         emitting = np.any(np.asarray(scene.emission)[patches.material] > 0, axis=1)
         mask = near_emitter_mask(patches, emitting, min_size=min_size)
         if not mask.any():

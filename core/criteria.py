@@ -35,9 +35,6 @@ PAIR_CHUNK = 2_000_000
 #: 0.4 m +10.6 %, 0.2 m +0.7 % too bright against converged Cycles (bench/compare/coarse.py).
 NEAR_EMITTER_FACTOR = 4.0
 
-#: At most this many rounds of near-emitter splitting (a 1 m patch down to 1/8 m).
-NEAR_EMITTER_LEVELS = 3
-
 #: (patch, emitter patch) pairs measured per chunk.
 NEAR_CHUNK = 4_000_000
 
