@@ -33,8 +33,8 @@ import time
 
 import numpy as np
 
-from .criteria import (EmitterSamples, contact_edges, contact_points, dark_floor, luminance,
-                       per_leaf_scores)
+from .criteria import (EmitterSamples, contact_edges, contact_points, dark_floor,
+                       interpolation_errors, luminance, per_leaf_scores)
 from .elements import bake_elements
 from .gather import NORMAL_DECIMALS, corner_groups, shade
 from .hemicube import point_rows
@@ -62,6 +62,13 @@ BUDGET_RETRIES = 6
 
 #: Hemicubes per point_rows call.
 GATHER_BATCH = 64
+
+#: A gather batch draws a solved patch whole, instead of its receiver elements, when it lies
+#: farther than this many times its size from every point of the batch: there it covers a few
+#: hemicube pixels, and its form factor is spread over its elements by area (exact for the
+#: gathered light when the form-factor kernel is flat across the patch; the kernel varies by
+#: (1 + 1/FAR_FIELD)^2 across it at worst).
+FAR_FIELD = 4.0
 
 #: Inset directions of per-corner (alone) gathers are matched after rounding to these decimals.
 DIRECTION_DECIMALS = 2
@@ -95,6 +102,82 @@ class _Seen:
         """(2K, 3) radiance of the kept nodes from the full (2P, 3)."""
         P = node_radiance.shape[0] // 2
         return np.concatenate([node_radiance[self.keep], node_radiance[P + self.keep]])
+
+
+class _Drawn:
+    """A Patches-like concatenation of whole patches and elements (what one batch draws)."""
+
+    def __init__(self, *parts):
+        self.centres = np.concatenate([p.centres for p in parts])
+        self.normals = np.concatenate([p.normals for p in parts])
+        self.corners = np.concatenate([p.corners for p in parts])
+        self.areas = np.concatenate([p.areas for p in parts])
+
+
+class FarField:
+    """Gather rows with far patches drawn whole (:data:`FAR_FIELD`), returned against the seen
+    elements' columns.
+
+    Parameters
+    ----------
+    patches : core.patches.Patches
+        The solved patches (P).
+    seen : _Seen
+        The drawn elements (K of them, a subset of the receiver elements).
+    parent : (K,) int64
+        Patch of each seen element.
+    """
+
+    def __init__(self, patches, seen, parent):
+        self.patches, self.seen, self.parent = patches, seen, parent
+        P = patches.areas.size
+        self.has = np.zeros(P, dtype=bool)
+        self.has[parent] = True
+        self.weight = seen.areas / patches.areas[parent]
+        c = patches.corners
+        self.radius = np.linalg.norm(c - patches.centres[:, None, :], axis=2).max(axis=1)
+        self.size = np.linalg.norm(c - np.roll(c, 1, axis=1), axis=2).max(axis=1)
+        self.drawn_items = 0
+
+    def rows(self, points, normals, **kw):
+        """(S, 2K) rows of ``points`` against the seen elements' nodes."""
+        lo, hi = points.min(axis=0), points.max(axis=0)
+        centres = self.patches.centres
+        gap = np.linalg.norm(centres - np.clip(centres, lo, hi), axis=1) - self.radius
+        far = self.has & (gap > FAR_FIELD * self.size)
+        if not far.any():
+            self.drawn_items += self.parent.size
+            return point_rows(self.seen, points, normals, **kw)
+        whole = np.flatnonzero(far)
+        near = np.flatnonzero(~far[self.parent])
+        drawn = _Drawn(_Seen(self.patches, whole), _Seen(self.seen, near))
+        self.drawn_items += whole.size + near.size
+        mixed = point_rows(drawn, points, normals, **kw)            # (S, 2D)
+        D, K, W = whole.size + near.size, self.parent.size, whole.size
+        out = np.zeros((points.shape[0], 2 * K))
+        out[:, near] = mixed[:, W:D]
+        out[:, K + near] = mixed[:, D + W:]
+        slot = np.full(far.size, -1, dtype=np.int64)
+        slot[whole] = np.arange(W)
+        child = np.flatnonzero(far[self.parent])
+        col = slot[self.parent[child]]
+        out[:, child] = mixed[:, col] * self.weight[child]
+        out[:, K + child] = mixed[:, D + col] * self.weight[child]
+        return out
+
+
+def _spatial_order(points):
+    """Indices that put ``points`` (n, 3) in Z order (batches of neighbours stay compact)."""
+    if points.shape[0] < 2:
+        return np.arange(points.shape[0])
+    lo = points.min(axis=0)
+    span = max(float(np.max(points.max(axis=0) - lo)), 1e-300)
+    q = np.minimum((points - lo) / span * 1024, 1023).astype(np.int64)
+    code = np.zeros(points.shape[0], dtype=np.int64)
+    for bit in range(10):
+        for axis in range(3):
+            code |= ((q[:, axis] >> bit) & 1) << (3 * bit + axis)
+    return np.argsort(code, kind="stable")
 
 
 def _seen_subset(patches, radiance, power):
@@ -277,6 +360,9 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         power = np.concatenate([power[elements.parent], power[P + elements.parent]])
     seen = _seen_subset(seen, seen_L, power)
     seen_L = seen.radiance(seen_L)
+    far_field = None
+    if elements is not None:
+        far_field = FarField(patches, seen, np.asarray(elements.parent)[seen.keep])
     emission = np.asarray(scene.emission)
     lit = np.any(np.asarray(incident)[:P] > 0, axis=1) \
         | np.any(emission[patches.material] > 0, axis=1)
@@ -304,15 +390,16 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         group_lit = np.zeros(groups.points.shape[0], dtype=bool)
         np.logical_or.at(group_lit, groups.group[ok], lit[corner_patch[ok]])
         go = new[group_lit[new]]
+        go = go[_spatial_order(groups.points[go])]
         inc = np.zeros((new.size, 3))
         vis = np.zeros(new.size, dtype=np.int64)
         batches = []
         pos_in_new = np.searchsorted(new, go)
         for s in range(0, go.size, GATHER_BATCH):
             g = go[s:s + GATHER_BATCH]
-            rows = point_rows(seen, groups.points[g], groups.normals[g],
-                              resolution=settings.resolution, rotate=settings.rotate_hemicube,
-                              rng=rng)
+            kw = dict(resolution=settings.resolution, rotate=settings.rotate_hemicube, rng=rng)
+            rows = point_rows(seen, groups.points[g], groups.normals[g], **kw) \
+                if far_field is None else far_field.rows(groups.points[g], groups.normals[g], **kw)
             cols, vals = compact_rows(rows)
             inc[pos_in_new[s:s + GATHER_BATCH]] = vals.astype(np.float64) @ seen_L[cols]
             batches.append((pos_in_new[s:s + GATHER_BATCH], cols, vals))
@@ -340,9 +427,12 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         corner_vis = np.zeros(C, dtype=np.int64)
         corner_vis[ok] = cache.vis[ids][groups.group[ok]]
         emitting_leaf = np.any(emission[np.asarray(tree.material)] > 0, axis=1)
-        score, marked = per_leaf_scores(tree, conf, luminance(corner_value), corner_vis,
+        corner_y = luminance(corner_value)
+        interp = interpolation_errors(tree, leaf_scene.corner_verts[ok], corner_y[ok],
+                                      floor)[leaf_scene.corner_verts]
+        score, marked = per_leaf_scores(tree, conf, corner_y, corner_vis,
                                         alone[leaf_scene.corner_verts], emitting_leaf, floor,
-                                        settings)
+                                        settings, corner_interp=interp)
         step.update(marked)
         split = _split_within(tree, score, settings.vertex_budget) if score.any() else None
         if split is None:

@@ -227,8 +227,39 @@ def _per_leaf(conf, values, n_leaves, fn, fill):
     return out
 
 
-def per_leaf_scores(tree, conf, corner_y, corner_vis, corner_alone, emitting_leaf, floor, settings):
-    """(E,) float: how badly each leaf needs splitting (0: not at all)."""
+def interpolation_errors(tree, corner_points, corner_y, floor):
+    """(V,) float: at each point a split made, how far its value is from the mean of the points
+    it was made from (an edge's two ends, a quad's four corners), relative to the brightest of
+    them (floored at ``floor``); NaN at the level-0 points and where a value is missing.
+
+    The output interpolates linearly: where a parent's new points agree with its corners, the
+    light across it is linear and splitting its children further buys nothing.
+    """
+    V = tree.points.shape[0]
+    y = np.full(V, np.nan)
+    y[corner_points] = -np.inf
+    np.maximum.at(y, corner_points, corner_y)
+    par = tree.point_parents
+    made = np.flatnonzero(par[:, 0] >= 0)
+    par = par[made]
+    have = par >= 0
+    yp = np.where(have, y[np.maximum(par, 0)], 0.0)
+    mean = yp.sum(axis=1) / have.sum(axis=1)
+    top = np.maximum(np.where(have, yp, -np.inf).max(axis=1), np.maximum(y[made], floor))
+    err = np.full(V, np.nan)
+    err[made] = np.abs(y[made] - mean) / top        # NaN where a value is missing
+    return err
+
+
+def per_leaf_scores(tree, conf, corner_y, corner_vis, corner_alone, emitting_leaf, floor, settings,
+                    corner_interp=None):
+    """(E,) float: how badly each leaf needs splitting (0: not at all).
+
+    ``corner_interp`` (C,) float, optional: :func:`interpolation_errors` at each corner (NaN
+    where unknown). A leaf with a split-made point among its corners and no interpolation error
+    above ``contrast`` there is not split for contrast: the light across its parent was linear,
+    which the output's interpolation already draws.
+    """
     E = tree.leaves.shape[0]
     hi = _per_leaf(conf, corner_y, E, np.maximum, -np.inf)
     lo = _per_leaf(conf, corner_y, E, np.minimum, np.inf)
@@ -236,7 +267,12 @@ def per_leaf_scores(tree, conf, corner_y, corner_vis, corner_alone, emitting_lea
     diff = np.zeros(E)
     diff[has] = (hi[has] - lo[has]) / np.maximum(hi[has], floor)
     area = np.asarray(tree.areas, dtype=np.float64)
-    score = np.where(diff > settings.contrast, area * diff / settings.contrast, 0.0)
+    steep = diff
+    if corner_interp is not None:
+        known = np.isfinite(corner_interp)
+        interp = _per_leaf(conf, np.where(known, corner_interp, -1.0), E, np.maximum, -1.0)
+        steep = np.where((interp >= 0) & (interp <= settings.contrast), 0.0, diff)
+    score = np.where(steep > settings.contrast, area * steep / settings.contrast, 0.0)
     vmax = _per_leaf(conf, corner_vis, E, np.maximum, np.int64(-1))
     vmin = _per_leaf(conf, corner_vis, E, np.minimum, np.int64(np.iinfo(np.int64).max))
     # A visibility change alone does not split: inside a wide penumbra every leaf sees a
@@ -249,7 +285,7 @@ def per_leaf_scores(tree, conf, corner_y, corner_vis, corner_alone, emitting_lea
     score = np.maximum(score, np.where(contact, 0.5 * area, 0.0))
     score[emitting_leaf] = 0.0
     score[size < 2.0 * settings.min_element] = 0.0
-    return score, dict(contrast=int(np.count_nonzero(diff > settings.contrast)),
+    return score, dict(contrast=int(np.count_nonzero(steep > settings.contrast)),
                        shadow=int(np.count_nonzero(shadow)), contact=int(np.count_nonzero(contact)))
 
 
@@ -299,4 +335,36 @@ def near_emitter_mask(patches, emitting, *, factor=NEAR_EMITTER_FACTOR, min_size
         near = gap * factor
         mask |= np.any(size[None, :] > near, axis=0)
         mask[e] |= np.any((size[e, None] > near) & ~emitting[None, :], axis=1)
+    return mask & (size > min_size)
+
+
+def near_facing_mask(patches, *, factor=NEAR_EMITTER_FACTOR, min_size=0.0):
+    """Patches too large for their distance to a patch facing them (a slot under a shelf).
+
+    Two patches face each other when each centre lies in front of the other's plane and their
+    normals are more than 120 degrees apart; their distance is bounded as in
+    :func:`near_emitter_mask`, and a patch is marked when its size exceeds ``factor`` times it.
+
+    Returns
+    -------
+    (P,) bool
+    """
+    P = patches.areas.size
+    mask = np.zeros(P, dtype=bool)
+    if P == 0:
+        return mask
+    corners = patches.corners
+    centres, normals = patches.centres, patches.normals
+    radius = np.linalg.norm(corners - centres[:, None, :], axis=2).max(axis=1)
+    size = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    step = max(1, NEAR_CHUNK // P)
+    for lo in range(0, P, step):
+        e = np.arange(lo, min(P, lo + step))
+        d = centres[None, :, :] - centres[e, None, :]                     # (E, P, 3)
+        along_e = np.einsum("epk,ek->ep", d, normals[e])
+        along_p = -np.einsum("epk,pk->ep", d, normals)
+        facing = (along_e > 0) & (along_p > 0) & (normals[e] @ normals.T < -0.5)
+        sphere = np.linalg.norm(d, axis=2) - radius[None, :] - radius[e, None]
+        gap = np.maximum(sphere, np.maximum(along_e, along_p))
+        mask |= np.any(facing & (size[None, :] > factor * gap), axis=0)
     return mask & (size > min_size)

@@ -116,7 +116,7 @@ class ElementTree:
     """
 
     def __init__(self, points, leaves, leaf_face, leaf_patch, leaf_level, material, mid_keys,
-                 mid_points, inc_key, inc_vertex, inc_corner, face_materials):
+                 mid_points, inc_key, inc_vertex, inc_corner, face_materials, point_parents=None):
         self.points = points
         self.leaves = leaves
         self.leaf_face = leaf_face
@@ -129,8 +129,13 @@ class ElementTree:
         # Sorted (point * F + face) of scene corners at points, with their vertex and corner.
         self._inc_key, self._inc_vertex, self._inc_corner = inc_key, inc_vertex, inc_corner
         self._face_materials = face_materials
+        # (V, 4) int64: the points a split point was made from (an edge's two, padded with -1,
+        # or a quad's four); -1 rows for the level-0 points.
+        if point_parents is None:
+            point_parents = np.full((points.shape[0], 4), -1, np.int64)
+        self.point_parents = point_parents
         for arr in (points, leaves, leaf_face, leaf_patch, leaf_level, material, self.normals,
-                    self.areas, self.sizes):
+                    self.areas, self.sizes, point_parents):
             arr.setflags(write=False)
 
     @property
@@ -286,7 +291,10 @@ class ElementTree:
         level = self.leaf_level[parent] + mask[parent]
         tree = ElementTree(points, leaves, self.leaf_face[parent], self.leaf_patch[parent], level,
                            self.material[parent], mid_keys, mid_points, self._inc_key,
-                           self._inc_vertex, self._inc_corner, self._face_materials)
+                           self._inc_vertex, self._inc_corner, self._face_materials,
+                           np.concatenate([self.point_parents,
+                                           np.stack([lo, hi, -np.ones_like(lo), -np.ones_like(lo)], 1),
+                                           lm[quads]]))
         return tree, parent.astype(np.int64)
 
     def _check_mask(self, mask):
