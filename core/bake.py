@@ -23,7 +23,7 @@ import numpy as np
 from .adaptive import coarse_patch_size, mesh_colours
 from .colours import corner_colours
 from .contacts import find_contacts, split_at_contacts
-from .criteria import face_variation, near_emitter_mask, near_facing_mask, unlit_late_nodes
+from .criteria import face_variation, near_emitter_mask, unlit_late_nodes
 from .duplicates import duplicate_warning, fill_duplicate_colours, merge_duplicates
 from .orient import orient
 from .patches import make_patches, subdivide_patches
@@ -145,17 +145,11 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     return result
 
 
-import os
-_FACING = os.environ.get('RB_FACING') == '1'
-
-
 def _split_near_emitters(scene, patches, min_size, levels):
     """Solve patches split where they are too large for their distance to an emitter."""
     for _ in range(levels):
         emitting = np.any(np.asarray(scene.emission)[patches.material] > 0, axis=1)
         mask = near_emitter_mask(patches, emitting, min_size=min_size)
-        if _FACING:
-            mask |= near_facing_mask(patches, min_size=min_size)
         if not mask.any():
             break
         patches, _ = subdivide_patches(patches, mask)

@@ -337,34 +337,3 @@ def near_emitter_mask(patches, emitting, *, factor=NEAR_EMITTER_FACTOR, min_size
         mask[e] |= np.any((size[e, None] > near) & ~emitting[None, :], axis=1)
     return mask & (size > min_size)
 
-
-def near_facing_mask(patches, *, factor=NEAR_EMITTER_FACTOR, min_size=0.0):
-    """Patches too large for their distance to a patch facing them (a slot under a shelf).
-
-    Two patches face each other when each centre lies in front of the other's plane and their
-    normals are more than 120 degrees apart; their distance is bounded as in
-    :func:`near_emitter_mask`, and a patch is marked when its size exceeds ``factor`` times it.
-
-    Returns
-    -------
-    (P,) bool
-    """
-    P = patches.areas.size
-    mask = np.zeros(P, dtype=bool)
-    if P == 0:
-        return mask
-    corners = patches.corners
-    centres, normals = patches.centres, patches.normals
-    radius = np.linalg.norm(corners - centres[:, None, :], axis=2).max(axis=1)
-    size = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
-    step = max(1, NEAR_CHUNK // P)
-    for lo in range(0, P, step):
-        e = np.arange(lo, min(P, lo + step))
-        d = centres[None, :, :] - centres[e, None, :]                     # (E, P, 3)
-        along_e = np.einsum("epk,ek->ep", d, normals[e])
-        along_p = -np.einsum("epk,pk->ep", d, normals)
-        facing = (along_e > 0) & (along_p > 0) & (normals[e] @ normals.T < -0.5)
-        sphere = np.linalg.norm(d, axis=2) - radius[None, :] - radius[e, None]
-        gap = np.maximum(sphere, np.maximum(along_e, along_p))
-        mask |= np.any(facing & (size[None, :] > factor * gap), axis=0)
-    return mask & (size > min_size)

@@ -289,12 +289,12 @@ class ElementTree:
         which = np.where(tri[ms][:, None], TRI_CHILDREN[child[s]], QUAD_CHILDREN[child[s]])
         leaves[s] = np.take_along_axis(table[ms], which, axis=1)
         level = self.leaf_level[parent] + mask[parent]
+        none = np.full_like(lo, -1)
+        made_from = np.concatenate([self.point_parents, np.stack([lo, hi, none, none], 1),
+                                    lm[quads]])
         tree = ElementTree(points, leaves, self.leaf_face[parent], self.leaf_patch[parent], level,
                            self.material[parent], mid_keys, mid_points, self._inc_key,
-                           self._inc_vertex, self._inc_corner, self._face_materials,
-                           np.concatenate([self.point_parents,
-                                           np.stack([lo, hi, -np.ones_like(lo), -np.ones_like(lo)], 1),
-                                           lm[quads]]))
+                           self._inc_vertex, self._inc_corner, self._face_materials, made_from)
         return tree, parent.astype(np.int64)
 
     def _check_mask(self, mask):
