@@ -15,10 +15,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import numpy as np  # noqa: E402
 
-try:
-    from bench.scenes import room_with_boxes  # noqa: E402
-except ImportError:  # before the sample scenes moved out of core (for before/after runs)
-    from core.samples import room_with_boxes  # noqa: E402
+from bench.scenes import room_with_boxes  # noqa: E402
 from core import BakeSettings, bake  # noqa: E402
 
 

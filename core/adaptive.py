@@ -37,6 +37,7 @@ from .criteria import (EmitterSamples, contact_edges, contact_points, dark_floor
                        interpolation_errors, luminance, per_leaf_scores)
 from .elements import bake_elements
 from .gather import NORMAL_DECIMALS, corner_groups, shade
+from .geometry import patch_extents
 from .hemicube import point_rows
 from .hierarchy import ElementTree, output_mesh
 from .progress import SubMonitor
@@ -134,10 +135,9 @@ class FarField:
         self.has = np.zeros(P, dtype=bool)
         self.has[parent] = True
         self.weight = seen.areas / patches.areas[parent]
-        c = patches.corners
-        self.radius = np.linalg.norm(c - patches.centres[:, None, :], axis=2).max(axis=1)
-        self.size = np.linalg.norm(c - np.roll(c, 1, axis=1), axis=2).max(axis=1)
+        self.radius, self.size = patch_extents(patches.corners, patches.centres)
         self.drawn_items = 0
+        self._last = None                      # (far mask, _Drawn) of the last batch
 
     def rows(self, points, normals, **kw):
         """(S, 2K) rows of ``points`` against the seen elements' nodes."""
@@ -150,7 +150,11 @@ class FarField:
             return point_rows(self.seen, points, normals, **kw)
         whole = np.flatnonzero(far)
         near = np.flatnonzero(~far[self.parent])
-        drawn = _Drawn(_Seen(self.patches, whole), _Seen(self.seen, near))
+        if self._last is None or not np.array_equal(self._last[0], far):
+            # Neighbouring batches (Z order) mostly share their far set: one object for them
+            # keeps point_rows' set-up cache (by identity) warm.
+            self._last = (far, _Drawn(_Seen(self.patches, whole), _Seen(self.seen, near)))
+        drawn = self._last[1]
         self.drawn_items += whole.size + near.size
         mixed = point_rows(drawn, points, normals, **kw)            # (S, 2D)
         D, K, W = whole.size + near.size, self.parent.size, whole.size
@@ -244,7 +248,6 @@ class _Cache:
         self.keys = np.zeros((0, 8))
         self.incident = np.zeros((0, 3))
         self.vis = np.zeros(0, dtype=np.int64)
-        self.gathered = np.zeros(0, dtype=bool)
         self.batches = []                      # (key ids (S,), cols (K,), vals (S, K) f32)
         self.n_nodes = n_nodes
 
@@ -259,16 +262,15 @@ class _Cache:
         where[inv[:self.keys.shape[0]]] = np.arange(self.keys.shape[0])
         return where[inv[self.keys.shape[0]:]]
 
-    def add(self, keys, incident, vis, gathered):
+    def add(self, keys, incident, vis):
         start = self.keys.shape[0]
         self.keys = np.concatenate([self.keys, keys])
         self.incident = np.concatenate([self.incident, incident])
         self.vis = np.concatenate([self.vis, vis])
-        self.gathered = np.concatenate([self.gathered, gathered])
         return np.arange(start, start + keys.shape[0])
 
     def rows_for(self, ids):
-        """GatherRows whose group g is cache entry ``ids[g]`` (``ids`` distinct; entries never
+        """A RowStore whose group g is cache entry ``ids[g]`` (``ids`` distinct; entries never
         gathered get no row: their incident light is zero)."""
         store = RowStore(ids.size, self.n_nodes)
         pos = np.full(self.keys.shape[0], -1, dtype=np.int64)
@@ -282,7 +284,7 @@ class _Cache:
 
 
 def _group_keys(leaf_scene, groups, alone):
-    """(G, 8) float64 cache keys of the corner groups, and the vertex of each group."""
+    """(G, 8) float64 cache keys of the corner groups."""
     ok = np.flatnonzero(groups.group >= 0)
     G = groups.points.shape[0]
     vertex = np.zeros(G, dtype=np.int64)
@@ -295,7 +297,7 @@ def _group_keys(leaf_scene, groups, alone):
                            groups.material[:, None].astype(np.float64),
                            np.round(groups.normals, NORMAL_DECIMALS),
                            np.round(direction, DIRECTION_DECIMALS)], axis=1)
-    return keys, vertex
+    return keys
 
 
 def _split_within(tree, score, budget):
@@ -364,8 +366,7 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
     if elements is not None:
         far_field = FarField(patches, seen, np.asarray(elements.parent)[seen.keep])
     emission = np.asarray(scene.emission)
-    lit = np.any(np.asarray(incident)[:P] > 0, axis=1) \
-        | np.any(emission[patches.material] > 0, axis=1)
+    lit = _lit(scene, patches, incident)
     floor = dark_floor(patches, L[:P], scene)
     rng = np.random.default_rng([settings.seed, 2])
     emitters = EmitterSamples(scene, patches, np.random.default_rng([settings.seed, 4]))
@@ -380,7 +381,7 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         leaf_scene = _leaf_scene(scene, tree, conf)
         alone = contact_points(tree.points, contacts) | contact_points(tree.points, outline)
         groups = corner_groups(leaf_scene, crease_angle=settings.crease_angle, on_contact=alone)
-        keys, _ = _group_keys(leaf_scene, groups, alone)
+        keys = _group_keys(leaf_scene, groups, alone)
         ids = cache.lookup(keys)
         new = np.flatnonzero(ids < 0)
         # Points next to no lit patch see no light: no hemicube.
@@ -409,9 +410,7 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
                                       f"mesh: level {level}, {tree.points.shape[0]} points")
         if go.size:
             vis[pos_in_new] = emitters.visibility(groups.points[go], groups.normals[go])
-        gathered = np.zeros(new.size, dtype=bool)
-        gathered[pos_in_new] = True
-        added = cache.add(keys[new], inc, vis, gathered)
+        added = cache.add(keys[new], inc, vis)
         cache.batches.extend((added[p], cols, vals) for p, cols, vals in batches)
         ids[new] = added
         group_value = shade(scene, groups.material, cache.incident[ids])
@@ -455,9 +454,20 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
                   points=int(tree.points.shape[0]), budget_hit=budget_hit,
                   per_object=per_object_report(scene, mesh))
     if elements is not None:
-        report["elements"] = dict(elements=int(elements.parent.size),
-                                  gathered=int(elements.computed.size), levels=elements.levels)
+        report["elements"] = _elements_report(elements)
     return mesh, state, report
+
+
+def _lit(scene, patches, incident):
+    """(P,) bool: patches that receive light or emit it."""
+    P = patches.areas.size
+    return np.any(np.asarray(incident)[:P] > 0, axis=1) \
+        | np.any(np.asarray(scene.emission)[patches.material] > 0, axis=1)
+
+
+def _elements_report(elements):
+    return dict(elements=int(elements.parent.size), gathered=int(elements.computed.size),
+                levels=elements.levels)
 
 
 def _user_corners(scene, mesh):
@@ -514,9 +524,7 @@ def mesh_colours(scene, settings, patches, node_radiance, incident, state, conta
     state : AdaptiveState
     report : dict
     """
-    P = patches.areas.size
-    lit = np.any(np.asarray(incident)[:P] > 0, axis=1) \
-        | np.any(np.asarray(scene.emission)[patches.material] > 0, axis=1)
+    lit = _lit(scene, patches, incident)
     t0 = time.perf_counter()
     if isinstance(state, AdaptiveState) and not np.any(lit & ~state.lit):
         mesh = dataclasses.replace(state.mesh,
@@ -524,9 +532,7 @@ def mesh_colours(scene, settings, patches, node_radiance, incident, state, conta
         state = AdaptiveState(**{**state.__dict__, "mesh": mesh})
         report = dict(rebuilt=False, per_object=per_object_report(scene, mesh))
         if state.elements is not None:
-            e = state.elements
-            report["elements"] = dict(elements=int(e.parent.size), gathered=int(e.computed.size),
-                                      levels=e.levels)
+            report["elements"] = _elements_report(state.elements)
     else:
         rebuilt = isinstance(state, AdaptiveState)       # a relight that lights new patches
         mesh, state, report = adaptive_output(scene, settings, patches, node_radiance, incident,

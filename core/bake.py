@@ -294,17 +294,16 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     monitor.stage(*_STAGES["colours"])
     monitor.update(0.0, "colours")
     t0 = time.perf_counter()
-    # stability (issue 11): each face is baked on the side that receives the light (core.orient)
-    side = orient(scene, patches, sol.incident, settings.two_sided,
+    # stability (issue 11): each face is baked on the side that receives the light (core.orient).
+    # The radiosity mesh bakes the side the normal points to (orientation: 'vertices' only, the
+    # element tree takes its normals from the patches' corners).
+    side = orient(scene, patches, sol.incident,
+                  settings.two_sided and settings.output_mode != "mesh",
                   kept.flipped if kept is not None else None, ff.store.row_sums)
     room_side = side.room_side(sol.node_radiance)
     gather = kept.gather if kept is not None else None
     mesh = mesh_report = None
     if settings.output_mode == "mesh":
-        # The radiosity mesh bakes the side the normal points to (orientation: 'vertices' only,
-        # the element tree takes its normals from the patches' corners).
-        side = orient(scene, patches, sol.incident, False)
-        room_side = side.room_side(sol.node_radiance)
         corner, mesh, gather, mesh_report = mesh_colours(
             scene, settings, patches, sol.node_radiance, sol.incident, gather, contact_lines,
             monitor, lambda: corner_colours(scene, patches, sol.node_radiance[:P],
@@ -347,7 +346,7 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     )
     if element_report is not None:
         report["elements"] = element_report
-    patch_radiance = room_side.copy()
+    patch_radiance = room_side
     if mesh_report is not None:
         report["mesh"] = mesh_report
     else:

@@ -10,6 +10,7 @@ compute (unlit faces).
 import numpy as np
 
 from .exact import ray_triangles
+from .geometry import patch_extents
 from .raycast import any_hit, build_bvh
 from .refine import DARK_FLOOR, LUMINANCE
 
@@ -317,8 +318,7 @@ def near_emitter_mask(patches, emitting, *, factor=NEAR_EMITTER_FACTOR, min_size
         return mask
     corners = patches.corners
     centres, normals = patches.centres, patches.normals
-    radius = np.linalg.norm(corners - centres[:, None, :], axis=2).max(axis=1)
-    size = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    radius, size = patch_extents(corners, centres)
     step = max(1, NEAR_CHUNK // P)
     for lo in range(0, src.size, step):
         e = src[lo:lo + step]

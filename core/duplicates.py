@@ -20,7 +20,6 @@ import numpy as np
 
 from .constants import tol
 from .contacts import _box_pairs
-from .geometry import ragged
 
 #: Corners of two duplicate faces coincide within this fraction of the face size (sqrt area).
 DUPLICATE_RTOL = 1e-4
@@ -55,14 +54,13 @@ def find_duplicates(scene, *, rtol=DUPLICATE_RTOL):
     valid = np.flatnonzero(scene.face_valid)
     if valid.size < 2:
         return duplicate_of
-    owner, _, starts = ragged(scene.face_sizes[valid])
     corners, _ = scene.face_corner_indices()
     first = np.cumsum(scene.face_sizes) - scene.face_sizes
     pos_all = scene.vertices[scene.corner_verts[corners]]
     centroid = (np.add.reduceat(pos_all, first, axis=0) / scene.face_sizes[:, None])[valid]
     size = np.sqrt(scene.face_areas[valid])
     reach = rtol * size
-    extent = np.ptp(centroid, axis=0).max() if valid.size else 0.0
+    extent = np.ptp(centroid, axis=0).max()
     cell = max(2.0 * float(reach.max()), extent / 2.0**20, np.finfo(float).tiny)
     lo, hi = centroid - reach[:, None], centroid + reach[:, None]
     i, j = _box_pairs(lo, hi, lo, hi, cell)

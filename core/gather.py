@@ -16,7 +16,7 @@ import numpy as np
 
 from .geometry import pairs_by_key, within_crease
 from .hemicube import point_rows
-from .rows import RowStore, compact_rows  # noqa: F401  (compact_rows: re-exported)
+from .rows import RowStore
 
 #: The gather point is moved from the vertex towards the centroids of its group's faces by this
 #: fraction of the faces' size (sqrt of area): a fraction of a millimetre for 0.2 m faces. It
@@ -117,10 +117,6 @@ def corner_groups(scene, *, crease_angle=30.0, on_contact=None):
 def shade(scene, material, incident):
     """Outgoing radiance ``Le + rho * incident`` (n, 3) of receivers of ``material`` (n,)."""
     return np.asarray(scene.emission)[material] + np.asarray(scene.reflectance)[material] * incident
-
-
-#: The gather's rows are kept like a bake's node rows (one store; row keys = corner groups).
-GatherRows = RowStore
 
 
 def gather_rows(patches, groups, *, resolution=64, rotate=True, rng=None, monitor=None,

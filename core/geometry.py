@@ -48,6 +48,14 @@ def _as_polygons(name, polygons):
     return arr
 
 
+def patch_extents(corners, centres):
+    """(radius, size) of (P, 4, 3) patch corners: the farthest corner from the centre, and the
+    longest edge (a triangle's repeated last corner gives a zero edge)."""
+    radius = np.linalg.norm(corners - centres[:, None, :], axis=2).max(axis=1)
+    size = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    return radius, size
+
+
 def newell_vectors(polygons, sizes=None):
     """Newell vector of every polygon: normal direction, length = area.
 

@@ -44,7 +44,7 @@ neighbours then carry a hanging midpoint each and are triangulated in the output
 
 import numpy as np
 
-from .conforming import (clip_convex_rings, output_mesh, parent_weights,  # noqa: F401 (API)
+from .conforming import (clip_convex_rings, output_mesh,  # noqa: F401 (API)
                          triangulate_hanging)
 from .geometry import newell_normals_areas, pairs_by_key, ragged
 from .patches import (QUAD_CHILDREN, TRI_CHILDREN, Patches, assemble_patches, connected_labels,
@@ -338,11 +338,6 @@ class ElementTree:
         hit = i >= 0
         return assemble_patches(corners, self.leaf_face, self._face_materials, n_faces,
                          self._inc_vertex[i[hit]], leaf[hit], self._inc_corner[i[hit]], slot[hit])
-
-    def output(self, scene, corner_colours, polygons=None):
-        """Shortcut: :func:`core.conforming.output_mesh` of ``polygons`` (default: conforming)."""
-        return output_mesh(scene, self, self.conforming() if polygons is None else polygons,
-                           corner_colours)
 
 
 def _weld(xyz, obj, size):

@@ -6,7 +6,7 @@
     ff = form_factors(patches, nodes, settings, monitor, kept)  # discovery: rows of active nodes
     sol = solve(ff, nodes, settings, monitor)                   # radiance of every node
     col = colours(scene, patches, sol.node_radiance, ...)       # corner colours
-    warnings, report = summary(...)
+    warnings, energy, n_dropped = check_result(...)
 
 Energy balance (report ``energy``, watts summed over RGB; power = pi x radiance x area):
 
@@ -28,6 +28,7 @@ import numpy as np
 from .colours import corner_colours
 from .elements import bake_elements
 from .gather import corner_groups, gather_rows, gathered_colours
+from .orient import BACKLIGHT_RATIO
 from .progress import SubMonitor
 from .reciprocity import asymmetry, make_reciprocal
 from .rows import Batcher, RowStore, discover, row_function, row_seconds
@@ -42,10 +43,6 @@ AUTO_DIRECT_MAX_NODES = 1000
 
 #: Progressive shooters per step are capped here (and by the measured batch speed).
 MAX_SHOOT_BATCH = 64
-
-#: A face is reported as lit from behind when its back side receives more than this times the
-#: power its front side receives (1: "more light on the back").
-BACKLIGHT_RATIO = 1.0
 
 #: The report warns when |emitted - absorbed - escaped| exceeds this fraction of the emitted
 #: power. With a converged solve the imbalance is the reciprocity error of the form factors,

@@ -258,7 +258,6 @@ def run(argv):
         out_given, out = bpy.data.filepath, src
         if not os.access(src, os.W_OK) or not os.access(os.path.dirname(src), os.W_OK):
             raise BatchError(f"--in-place: {out_given} or its folder is not writable")
-        del taken[src]
         taken[src] = "--in-place"
     elif args.output:
         if os.path.exists(args.output) and os.path.samefile(args.output, src):

@@ -140,8 +140,11 @@ ATTRIBUTE_TYPES = {"FLOAT": ("value", 1, np.float32), "FLOAT2": ("vector", 2, np
                    "INT": ("value", 1, np.int32), "INT8": ("value", 1, np.int32),
                    "BOOLEAN": ("value", 1, bool)}
 
+#: Name of the colour attribute the bake writes (and the only one it touches or clears).
+ATTRIBUTE = "Radiosity"
+
 #: Attributes a baked mesh gets otherwise (geometry, UV maps, material, shading) or never keeps.
-OWN_ATTRIBUTES = {"position", "material_index", "sharp_face", "Radiosity"}
+OWN_ATTRIBUTES = {"position", "material_index", "sharp_face", ATTRIBUTE}
 
 
 def read_attributes(mesh):

@@ -10,6 +10,8 @@ import json
 
 import bpy
 
+from .extract import ATTRIBUTE
+
 #: Stage timings of the report, in the order a user reads them, with their labels (total first).
 STAGE_LABELS = (
     ("total", "Total"),
@@ -21,8 +23,6 @@ STAGE_LABELS = (
     ("write", "Write"),
 )
 
-#: Name of the colour attribute a bake writes (write.ATTRIBUTE, without importing bpy data code).
-ATTRIBUTE = "Radiosity"
 
 
 def _split_row(layout, label):

@@ -27,10 +27,7 @@ import numpy as np
 from ..core import transfer
 from ..core.geometry import ragged
 from ..core.transfer import CORNER_INSET  # noqa: F401  (the tolerance of the corner mapping)
-from .extract import ATTRIBUTE_TYPES, read_mesh_layout, transform
-
-#: Name of the colour attribute the bake writes (and the only one it touches or clears).
-ATTRIBUTE = "Radiosity"
+from .extract import ATTRIBUTE, ATTRIBUTE_TYPES, read_mesh_layout, transform
 
 #: Object custom property: the original mesh (an ID pointer) while the object shows a baked mesh.
 PROP_ORIGINAL = "radiosity_original"

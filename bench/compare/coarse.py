@@ -207,8 +207,7 @@ def ref_queries(arrays, scene, names):
     """Query points of the reference's corners: positions (C, 3), normals (C, 3), groups (C,)
     (index into ``names`` of the corner's object)."""
     face = np.repeat(np.arange(len(arrays["face_starts"])), arrays["face_sizes"])
-    index = {name: i for i, name in enumerate(names)}
-    obj = np.array([index[str(arrays["object_names"][o])] for o in arrays["face_objects"]])
+    obj = groups_of(arrays, names)
     return (arrays["vertices"][arrays["corner_verts"]], scene.face_normals[face], obj[face])
 
 

@@ -32,7 +32,7 @@ ESC_AT = 1.0
 #: Give up waiting on any one step after this many seconds.
 STEP_LIMIT = 240.0
 
-results = {"steps": [], "error": None}
+results = {"error": None}
 
 
 def save():
@@ -129,7 +129,6 @@ def scenario():
     results["sidebar"] = {"category": ui.active_panel_category, "width": ui.width,
                           "ui_scale": prefs.system.ui_scale}
     results["shading_before"] = shading()
-    results["show_bake_drawn_before"] = None
     screenshot("before_bake.png")
     before = snapshot()
 
