@@ -6,12 +6,13 @@ are re-exported here; see README.md for a runnable example and docs/design.md fo
 
 from .bake import BakeResult, bake, form_factor_matrix, relight
 from .errors import BakeCancelled, RadiosityError, SceneError, SettingsError
+from .lights import Lights, make_lights
 from .outmesh import OutputMesh
 from .scene import Scene, make_scene, scene_from_polygons
 from .settings import BakeSettings
 
 __all__ = [
     "BakeCancelled", "RadiosityError", "SceneError", "SettingsError",
-    "OutputMesh", "Scene", "make_scene", "scene_from_polygons",
+    "Lights", "make_lights", "OutputMesh", "Scene", "make_scene", "scene_from_polygons",
     "BakeResult", "BakeSettings", "bake", "form_factor_matrix", "relight",
 ]

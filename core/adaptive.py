@@ -33,7 +33,7 @@ import time
 
 import numpy as np
 
-from .criteria import (EmitterSamples, contact_edges, contact_points, dark_floor,
+from .criteria import (SHADOW_SAMPLES, EmitterSamples, contact_edges, contact_points, dark_floor,
                        interpolation_errors, luminance, per_leaf_scores)
 from .elements import bake_elements
 from .gather import NORMAL_DECIMALS, corner_groups, shade
@@ -216,6 +216,8 @@ class AdaptiveState:
         The (lit) patches or elements the gathers drew.
     user : (C,) int64
         Output corner whose colour each user corner takes (-1: none, a dropped face).
+    direct : (U, 3) float64
+        Direct light (irradiance / pi) of the point, spot and sun lights at the U points.
     """
 
     def __init__(self, **kw):
@@ -226,19 +228,27 @@ class AdaptiveState:
         L = node_radiance
         if self.elements is not None:
             L = self.elements.node_radiance(scene, node_radiance)
-        inc = self.rows.incident(self.seen.radiance(L))
+        inc = self.rows.incident(self.seen.radiance(L)) + self.direct
         return shade(scene, self.material, inc)[self.entry]
 
 
-def _leaf_scene(scene, tree, conf):
-    """The conforming triangulation of the leaves as a Scene of its own."""
+def _leaf_scene(scene, tree, conf, flipped=None):
+    """The conforming triangulation of the leaves as a Scene of its own (the faces of ``flipped``
+    user faces with their normals reversed: gathered on the side that faces the room)."""
 
     leaf = conf["face_leaf"]
-    return make_scene(tree.points, conf["corner_verts"], conf["face_starts"], conf["face_sizes"],
+    out = make_scene(tree.points, conf["corner_verts"], conf["face_starts"], conf["face_sizes"],
                       np.asarray(tree.material)[leaf], scene.reflectance, scene.emission,
                       face_objects=scene.face_objects[conf["face_parent"]],
                       object_names=scene.object_names, material_names=scene.material_names,
-                      back_reflectance=scene.back_reflectance, back_emission=scene.back_emission)
+                      back_reflectance=scene.back_reflectance, back_emission=scene.back_emission,
+                      lights=scene.lights)
+    if flipped is None or not flipped.any():
+        return out
+    turn = flipped[conf["face_parent"]]
+    normals = np.where(turn[:, None], -out.face_normals, out.face_normals)
+    normals.setflags(write=False)
+    return dataclasses.replace(out, face_normals=normals)
 
 
 class _Cache:
@@ -247,6 +257,7 @@ class _Cache:
     def __init__(self, n_nodes):
         self.keys = np.zeros((0, 8))
         self.incident = np.zeros((0, 3))
+        self.direct = np.zeros((0, 3))
         self.vis = np.zeros(0, dtype=np.int64)
         self.batches = []                      # (key ids (S,), cols (K,), vals (S, K) f32)
         self.n_nodes = n_nodes
@@ -262,10 +273,11 @@ class _Cache:
         where[inv[:self.keys.shape[0]]] = np.arange(self.keys.shape[0])
         return where[inv[self.keys.shape[0]:]]
 
-    def add(self, keys, incident, vis):
+    def add(self, keys, incident, vis, direct):
         start = self.keys.shape[0]
         self.keys = np.concatenate([self.keys, keys])
         self.incident = np.concatenate([self.incident, incident])
+        self.direct = np.concatenate([self.direct, direct])
         self.vis = np.concatenate([self.vis, vis])
         return np.arange(start, start + keys.shape[0])
 
@@ -319,7 +331,7 @@ def _split_within(tree, score, budget):
 
 
 def adaptive_output(scene, settings, patches, node_radiance, incident, *, contacts=None,
-                    monitor=None):
+                    monitor=None, direct=None, flipped=None):
     """Refine the receiver elements where the light changes; gather at their vertices.
 
     Parameters
@@ -338,6 +350,12 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
     contacts : core.contacts.Contacts, optional
         Contact lines: points on them gather per corner and leaves along them refine.
     monitor : core.progress.Monitor or SubMonitor, optional
+    direct : core.lights.DirectLight, optional
+        The point, spot and sun lights: their direct light is added at every gathered point,
+        and a change in which of them a leaf's vertices see marks a shadow edge.
+    flipped : (F,) bool, optional
+        User faces baked on their back side (:mod:`core.orient`): their points gather along the
+        reversed normal.
 
     Returns
     -------
@@ -353,7 +371,7 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
     seen, seen_L = patches, L
     gather_monitor = monitor
     elements = bake_elements(scene, patches, L, settings,
-                             None if monitor is None else SubMonitor(monitor, 0.0, 0.2))
+                             None if monitor is None else SubMonitor(monitor, 0.0, 0.2), direct)
     if elements is not None:
         seen, seen_L = elements.patches, elements.node_radiance(scene, L)
         gather_monitor = None if monitor is None else SubMonitor(monitor, 0.2, 1.0)
@@ -366,7 +384,7 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
     if elements is not None:
         far_field = FarField(patches, seen, np.asarray(elements.parent)[seen.keep])
     emission = np.asarray(scene.emission)
-    lit = _lit(scene, patches, incident)
+    lit = _lit(scene, patches, incident, flipped)
     floor = dark_floor(patches, L[:P], scene)
     rng = np.random.default_rng([settings.seed, 2])
     emitters = EmitterSamples(scene, patches, np.random.default_rng([settings.seed, 4]))
@@ -378,7 +396,7 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
     for level in range(MAX_LEVELS + 1):
         t0 = time.perf_counter()
         conf = tree.conforming()
-        leaf_scene = _leaf_scene(scene, tree, conf)
+        leaf_scene = _leaf_scene(scene, tree, conf, flipped)
         alone = contact_points(tree.points, contacts) | contact_points(tree.points, outline)
         groups = corner_groups(leaf_scene, crease_angle=settings.crease_angle, on_contact=alone)
         keys = _group_keys(leaf_scene, groups, alone)
@@ -393,6 +411,7 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         go = new[group_lit[new]]
         go = go[_spatial_order(groups.points[go])]
         inc = np.zeros((new.size, 3))
+        dl = np.zeros((new.size, 3))
         vis = np.zeros(new.size, dtype=np.int64)
         batches = []
         pos_in_new = np.searchsorted(new, go)
@@ -410,7 +429,12 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
                                       f"mesh: level {level}, {tree.points.shape[0]} points")
         if go.size:
             vis[pos_in_new] = emitters.visibility(groups.points[go], groups.normals[go])
-        added = cache.add(keys[new], inc, vis)
+            if direct is not None:
+                dl[pos_in_new], bits = direct.incident(groups.points[go], groups.normals[go],
+                                                       bits=True)
+                inc[pos_in_new] += dl[pos_in_new]
+                vis[pos_in_new] |= bits << SHADOW_SAMPLES
+        added = cache.add(keys[new], inc, vis, dl)
         cache.batches.extend((added[p], cols, vals) for p, cols, vals in batches)
         ids[new] = added
         group_value = shade(scene, groups.material, cache.incident[ids])
@@ -449,7 +473,7 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
     state = AdaptiveState(mesh=mesh, entry=corner_entry,
                           material=cache.keys[u_ids, 1].astype(np.int64),
                           rows=cache.rows_for(u_ids), lit=lit, elements=elements, seen=seen,
-                          user=_user_corners(scene, mesh))
+                          user=_user_corners(scene, mesh), direct=cache.direct[u_ids])
     report = dict(levels=steps, leaves=int(tree.leaves.shape[0]),
                   points=int(tree.points.shape[0]), budget_hit=budget_hit,
                   per_object=per_object_report(scene, mesh))
@@ -458,10 +482,15 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
     return mesh, state, report
 
 
-def _lit(scene, patches, incident):
-    """(P,) bool: patches that receive light or emit it."""
+def _lit(scene, patches, incident, flipped=None):
+    """(P,) bool: patches that receive light (on the side baked: the back of ``flipped`` faces)
+    or emit it."""
     P = patches.areas.size
-    return np.any(np.asarray(incident)[:P] > 0, axis=1) \
+    inc = np.asarray(incident)
+    if flipped is not None and flipped.any():
+        turn = flipped[patches.face]
+        inc = np.where(turn[:, None], inc[P:], inc[:P])
+    return np.any(inc[:P] > 0, axis=1) \
         | np.any(np.asarray(scene.emission)[patches.material] > 0, axis=1)
 
 
@@ -508,7 +537,7 @@ def per_object_report(scene, mesh):
 
 
 def mesh_colours(scene, settings, patches, node_radiance, incident, state, contacts, monitor,
-                 fallback):
+                 direct, fallback, flipped=None):
     """The 'mesh' output's colours stage of a bake or a relight.
 
     A relight (``state`` an :class:`AdaptiveState`) keeps the mesh and re-shades its kept rows;
@@ -524,7 +553,7 @@ def mesh_colours(scene, settings, patches, node_radiance, incident, state, conta
     state : AdaptiveState
     report : dict
     """
-    lit = _lit(scene, patches, incident)
+    lit = _lit(scene, patches, incident, flipped)
     t0 = time.perf_counter()
     if isinstance(state, AdaptiveState) and not np.any(lit & ~state.lit):
         mesh = dataclasses.replace(state.mesh,
@@ -536,7 +565,8 @@ def mesh_colours(scene, settings, patches, node_radiance, incident, state, conta
     else:
         rebuilt = isinstance(state, AdaptiveState)       # a relight that lights new patches
         mesh, state, report = adaptive_output(scene, settings, patches, node_radiance, incident,
-                                              contacts=contacts, monitor=monitor)
+                                              contacts=contacts, monitor=monitor, direct=direct,
+                                              flipped=flipped)
         report["rebuilt"] = rebuilt
     colours = np.zeros((scene.n_corners, 3))
     has = state.user >= 0

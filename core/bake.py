@@ -24,6 +24,7 @@ from .adaptive import coarse_patch_size, mesh_colours
 from .colours import corner_colours
 from .contacts import find_contacts, split_at_contacts
 from .criteria import face_variation, near_emitter_mask, unlit_late_nodes
+from .lights import DirectLight
 from .duplicates import duplicate_warning, fill_duplicate_colours, merge_duplicates
 from .orient import orient
 from .patches import make_patches, subdivide_patches
@@ -89,6 +90,7 @@ class _State:
     on_contact: np.ndarray = None  # (V,) bool: vertices on a contact line, gathered per corner
     contact_lines: object = None  # core.contacts.Contacts ('mesh' output), or None
     flipped: np.ndarray = None    # (F,) bool: faces baked on their back side (core.orient)
+    direct: object = None         # core.lights.DirectLight of the scene's lights, or None
 
 
 def bake(scene, settings=None, *, progress=None, cancel=None):
@@ -241,7 +243,7 @@ def relight(result, *, reflectance=None, emission=None, progress=None, cancel=No
         arr.setflags(write=False)
         changes[name] = arr
     new_scene = dataclasses.replace(scene, **changes)
-    if not np.any(new_scene.emission[state.patches.material] > 0):
+    if not np.any(new_scene.emission[state.patches.material] > 0) and scene.lights is None:
         raise ValueError("emission leaves no emitting patch: nothing to light the scene")
     monitor = Monitor(progress, cancel)
     t_start = time.perf_counter()
@@ -266,8 +268,14 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     them followed by this run's.
     """
     P = len(patches.areas)
-    nodes = node_arrays(scene, patches, settings.two_sided)
     timings = dict(timings)
+    t0 = time.perf_counter()
+    direct = kept.direct if kept is not None else None
+    if direct is None and scene.lights is not None:
+        direct = DirectLight(scene.lights, patches, settings.light_samples)
+    nodes = node_arrays(scene, patches, settings.two_sided, direct)
+    if direct is not None:
+        timings["lights"] = time.perf_counter() - t0
 
     monitor.stage(*_STAGES["form_factors"])
     monitor.update(0.0, "form factors")
@@ -295,10 +303,7 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     monitor.update(0.0, "colours")
     t0 = time.perf_counter()
     # stability (issue 11): each face is baked on the side that receives the light (core.orient).
-    # The radiosity mesh bakes the side the normal points to (orientation: 'vertices' only, the
-    # element tree takes its normals from the patches' corners).
-    side = orient(scene, patches, sol.incident,
-                  settings.two_sided and settings.output_mode != "mesh",
+    side = orient(scene, patches, sol.incident, settings.two_sided,
                   kept.flipped if kept is not None else None, ff.store.row_sums)
     room_side = side.room_side(sol.node_radiance)
     gather = kept.gather if kept is not None else None
@@ -306,13 +311,14 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     if settings.output_mode == "mesh":
         corner, mesh, gather, mesh_report = mesh_colours(
             scene, settings, patches, sol.node_radiance, sol.incident, gather, contact_lines,
-            monitor, lambda: corner_colours(scene, patches, sol.node_radiance[:P],
-                                            crease_angle=settings.crease_angle))
+            monitor, direct, lambda: corner_colours(scene, patches, room_side,
+                                                    crease_angle=settings.crease_angle),
+            flipped=side.flipped)
         element_report = mesh_report.pop("elements", None)
     elif settings.corners == "gather":
         if gather is None:
             gather = make_gather(side.scene, patches, sol.node_radiance, settings, monitor,
-                                 on_contact)
+                                 on_contact, direct)
         corner, element_report = colours(side.scene, patches, sol.node_radiance, settings,
                                          gather)
     else:
@@ -352,7 +358,10 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     else:
         report["face_variation"] = face_variation(scene, patches, patch_radiance,
                                                   settings.contrast)
+    if direct is not None:
+        report["lights"] = dict(count=len(direct), names=list(scene.lights.names),
+                                shadow_rays=int(direct.rays))
     state = _State(scene, settings, patches, sol.store, ff.active, gather, on_contact,
-                   contact_lines, side.flipped)
+                   contact_lines, side.flipped, direct)
     return BakeResult(corner, patch_radiance, sol.node_radiance, patches, report, state,
                       output=mesh)

@@ -42,11 +42,14 @@ class Elements:
         that order.
     levels : list of dict
         Per level: ``split`` (patches or elements split) and ``elements`` (count after it).
+    direct : (K, 3) float64 or None
+        Direct light (irradiance / pi) of the point, spot and sun lights at the centres of
+        ``computed``.
     """
 
-    def __init__(self, patches, parent, computed, rows, levels):
+    def __init__(self, patches, parent, computed, rows, levels, direct=None):
         self.patches, self.parent, self.computed = patches, parent, computed
-        self.rows, self.levels = rows, levels
+        self.rows, self.levels, self.direct = rows, levels, direct
 
     def node_radiance(self, scene, node_radiance):
         """Radiance of the elements' 2E nodes from the solved patches' (2P, 3) node radiance.
@@ -61,8 +64,10 @@ class Elements:
         out[:E] = L[self.parent]
         out[E:] = L[P + self.parent]
         if self.computed.size:
-            out[self.computed] = shade(scene, self.patches.material[self.computed],
-                                       self.rows.incident(L))
+            incident = self.rows.incident(L)
+            if self.direct is not None:
+                incident = incident + self.direct
+            out[self.computed] = shade(scene, self.patches.material[self.computed], incident)
         return out
 
 
@@ -75,7 +80,7 @@ def _survivors(mask, parent):
 
 
 def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_angle,
-                  resolution=64, rotate=True, rng=None, monitor=None, batch=64):
+                  resolution=64, rotate=True, rng=None, monitor=None, batch=64, direct=None):
     """Split the solved patches where their light changes and gather the elements' radiance.
 
     Parameters
@@ -99,6 +104,8 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
         Progress (over the levels) and cancel.
     batch : int
         Elements per hemicube call.
+    direct : core.lights.DirectLight, optional
+        The point, spot and sun lights: their direct light is added at the element centres.
 
     Returns
     -------
@@ -114,7 +121,7 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
     elements = patches
     parent = np.arange(P, dtype=np.int64)          # solved patch of every element
     front = L[:P].copy()                           # current front radiance of every element
-    kept = []                                      # (element ids, cols, vals) of gathered ones
+    kept = []                                      # (element ids, cols, vals, direct) gathered
     steps = []
     for level in range(levels):
         emitting = np.any(emission[elements.material] > 0, axis=1)
@@ -125,10 +132,10 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
         elements, split_parent = subdivide_patches(elements, mask)
         remap = _survivors(mask, split_parent)
         remapped = []
-        for ids, cols, vals in kept:              # per batch of rows, not per element
+        for ids, cols, vals, dl in kept:          # per batch of rows, not per element
             ids = remap[ids]
             ok = ids >= 0
-            remapped.append((ids[ok], cols, vals[ok]))
+            remapped.append((ids[ok], cols, vals[ok], dl[ok]))
         kept = remapped
         parent = parent[split_parent]
         front = front[split_parent]
@@ -139,22 +146,28 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
             rows = point_rows(patches, elements.centres[ids], elements.normals[ids],
                               resolution=resolution, rotate=rotate, rng=rng)
             cols, vals = compact_rows(rows)
-            kept.append((ids, cols, vals))
-            front[ids] = shade(scene, elements.material[ids], vals.astype(np.float64) @ L[cols])
+            dl = np.zeros((ids.size, 3)) if direct is None else \
+                direct.incident(elements.centres[ids], elements.normals[ids])
+            kept.append((ids, cols, vals, dl))
+            front[ids] = shade(scene, elements.material[ids],
+                               vals.astype(np.float64) @ L[cols] + dl)
             if monitor is not None:
                 monitor.update((level + (s + ids.size) / new.size) / levels,
                                f"elements: level {level + 1}, {parent.size} elements")
     # Rows kept in the order of ``computed`` (the store's row keys are positions in it).
-    computed = np.concatenate([ids for ids, _, _ in kept]) if kept else np.zeros(0, np.int64)
+    computed = np.concatenate([k[0] for k in kept]) if kept else np.zeros(0, np.int64)
     store = RowStore(computed.size, 2 * P)
     start = 0
-    for ids, cols, vals in kept:
+    for ids, cols, vals, _ in kept:
         store.add_compact(np.arange(start, start + ids.size), cols, vals)
         start += ids.size
-    return Elements(elements, parent, computed, store, steps)
+    at_centres = None
+    if direct is not None:
+        at_centres = np.concatenate([k[3] for k in kept]) if kept else np.zeros((0, 3))
+    return Elements(elements, parent, computed, store, steps, at_centres)
 
 
-def bake_elements(scene, patches, node_radiance, settings, monitor=None):
+def bake_elements(scene, patches, node_radiance, settings, monitor=None, direct=None):
     """:func:`make_elements` with a bake's settings (``element_levels``, ``element_threshold``,
     ``crease_angle``, hemicube settings, the seed's element stream); None when levels are 0."""
     if not settings.element_levels:
@@ -163,4 +176,5 @@ def bake_elements(scene, patches, node_radiance, settings, monitor=None):
                          threshold=settings.element_threshold,
                          crease_angle=settings.crease_angle, resolution=settings.resolution,
                          rotate=settings.rotate_hemicube,
-                         rng=np.random.default_rng([settings.seed, 3]), monitor=monitor)
+                         rng=np.random.default_rng([settings.seed, 3]), monitor=monitor,
+                         direct=direct)

@@ -134,7 +134,7 @@ def gather_rows(patches, groups, *, resolution=64, rotate=True, rng=None, monito
     return store
 
 
-def gathered_colours(scene, groups, store, node_radiance, fallback):
+def gathered_colours(scene, groups, store, node_radiance, fallback, direct=None):
     """Corner colours from the kept gather rows: ``Le + rho * incident`` of each corner's group.
 
     Parameters
@@ -145,12 +145,17 @@ def gathered_colours(scene, groups, store, node_radiance, fallback):
     node_radiance : (2P, 3) float
     fallback : (C, 3) float
         Colours for corners of dropped faces (group -1).
+    direct : (G, 3) float, optional
+        Direct light (irradiance / pi) of the point, spot and sun lights at every group.
 
     Returns
     -------
     (C, 3) float64
     """
-    L = shade(scene, groups.material, store.incident(node_radiance))
+    incident = store.incident(node_radiance)
+    if direct is not None:
+        incident = incident + direct
+    L = shade(scene, groups.material, incident)
     out = np.array(fallback, dtype=np.float64, copy=True)
     ok = groups.group >= 0
     out[ok] = L[groups.group[ok]]

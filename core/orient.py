@@ -12,8 +12,10 @@ more light than its front (power summed over its patches) is *flipped*: its corn
 names the objects. An emitter's own light makes that test meaningless (a lamp just under the
 ceiling lights the ceiling, which lights the lamp's back), so an emitter is flipped when its
 front's light mostly leaves the scene (row sum < ``OPEN_SIDE``) while its back's does not:
-its front faces the outside. Nothing is changed in the user's data. With ``two_sided=False``
-back sides are black by request and nothing is flipped.
+its front faces the outside. Likewise any face with one side open to the outside (row sum below
+``OPEN_SIDE``) and the other closed in, both sides lit, bakes its closed side: the room side of a
+wall whose outside the sun lights. Nothing is changed in the user's data. With
+``two_sided=False`` back sides are black by request and nothing is flipped.
 """
 
 import dataclasses
@@ -56,7 +58,8 @@ def flipped_faces(scene, patches, incident, row_sums=None):
     back = np.bincount(patches.face, weights=power[P:], minlength=F)
     area = np.bincount(patches.face, weights=patches.areas, minlength=F)
     mean_irradiance = power.sum() / max(2.0 * float(area.sum()), np.finfo(float).tiny)
-    flipped = (back > BACKLIGHT_RATIO * front) & (back > MIN_LIT * mean_irradiance * area)
+    back_lit = back > MIN_LIT * mean_irradiance * area
+    flipped = (back > BACKLIGHT_RATIO * front) & back_lit
     emits = np.zeros(F, dtype=bool)
     emits[patches.face[np.any(np.asarray(scene.emission)[patches.material] > 0, axis=1)]] = True
     flipped &= ~emits
@@ -68,7 +71,13 @@ def flipped_faces(scene, patches, incident, row_sums=None):
         fr = np.bincount(patches.face, weights=w * np.nan_to_num(s[:P]), minlength=F)
         bk = np.bincount(patches.face, weights=w * np.nan_to_num(s[P:]), minlength=F)
         open_front = (fr < OPEN_SIDE * wsum) & (bk >= OPEN_SIDE * wsum) & (wsum > 0)
+        open_back = (bk < OPEN_SIDE * wsum) & (fr >= OPEN_SIDE * wsum) & (wsum > 0)
         flipped |= emits & open_front
+        # A face with one side open to the outside and the other closed in faces the room with
+        # the closed side, whichever side the light reaches more: the sun on a room's outside
+        # walls, or a lamp outside a window, must not turn the walls inside out.
+        flipped = np.where(~emits & open_back, False, flipped)
+        flipped = np.where(~emits & open_front & back_lit, True, flipped)
     return flipped
 
 

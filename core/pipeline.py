@@ -65,21 +65,36 @@ class Nodes:
     areas : (2P,) float64
     allowed : (2P,) bool
         Nodes that may become active (back nodes are black when ``two_sided=False``).
+    direct : (2P, 3) float64 or None
+        Mean irradiance / pi of every node from the point, spot and sun lights
+        (:meth:`core.lights.DirectLight.patch_incident`); None: no such lights.
     """
 
     rho: np.ndarray
     le: np.ndarray
     areas: np.ndarray
     allowed: np.ndarray
+    direct: np.ndarray = None
+
+    @property
+    def source(self):
+        """(2P, 3) what each node sends before any bounce between surfaces: its emission plus
+        the direct light it reflects, ``Le + rho E / pi`` (lights shot first)."""
+        if self.direct is None:
+            return self.le
+        return self.le + self.rho * self.direct
 
     @property
     def emitting(self):
-        """(E,) int64: allowed nodes that emit."""
-        return np.flatnonzero(np.any(self.le > 0, axis=1) & self.allowed)
+        """(E,) int64: allowed nodes that emit (or reflect direct light)."""
+        return np.flatnonzero(np.any(self.source > 0, axis=1) & self.allowed)
 
 
-def node_arrays(scene, patches, two_sided):
-    """Per-node reflectance, emission, areas and the nodes allowed to be active (:class:`Nodes`)."""
+def node_arrays(scene, patches, two_sided, direct=None):
+    """Per-node reflectance, emission, areas and the nodes allowed to be active (:class:`Nodes`).
+
+    ``direct``: a :class:`core.lights.DirectLight` of the scene's lights, or None.
+    """
     P = len(patches.areas)
     rho = np.asarray(scene.reflectance, dtype=np.float64)[patches.material]
     le = np.asarray(scene.emission, dtype=np.float64)[patches.material]
@@ -94,7 +109,8 @@ def node_arrays(scene, patches, two_sided):
     allowed = np.ones(2 * P, dtype=bool)
     if not two_sided:
         allowed[P:] = False
-    return Nodes(rho_n, le_n, areas, allowed)
+    direct_n = direct.patch_incident(patches, two_sided) if direct is not None else None
+    return Nodes(rho_n, le_n, areas, allowed, direct_n)
 
 
 @dataclass(frozen=True)
@@ -239,7 +255,7 @@ def solve(ff, nodes, settings, monitor):
 
 
 def _solve_dense(ff, nodes, settings, solver, monitor):
-    store, rho, le, areas = ff.store, nodes.rho, nodes.le, nodes.areas
+    store, rho, le, areas = ff.store, nodes.rho, nodes.source, nodes.areas
     N = len(areas)
     idx = np.flatnonzero(ff.active)
     n_a = len(idx)
@@ -274,12 +290,14 @@ def _solve_dense(ff, nodes, settings, solver, monitor):
     H = np.zeros((N, 3))
     H[idx] = matvec(F, L)
     incident = H * areas[:, None]
+    if nodes.direct is not None:            # the lights' direct light arrives too
+        incident += nodes.direct * areas[:, None]
     sent = areas[idx, None] * L                              # (n_a, 3)
     if black_block is not None:
         incident[black] = black_block.T.astype(np.float64) @ sent
     escaped = ((1.0 - store.row_sums[idx])[:, None] * sent).sum(axis=0)
     absorbed = ((1.0 - rho) * incident).sum(axis=0)
-    emitted = (le[idx] * areas[idx, None]).sum(axis=0)
+    emitted = (nodes.le[idx] * areas[idx, None]).sum(axis=0) + _direct_power(nodes)
     return Solution(node_radiance, res, solver, ff.active, incident,
                     (emitted, absorbed, escaped), recip, int(matrix_bytes), store, [])
 
@@ -299,37 +317,57 @@ def _solve_matrix_free(ff, nodes, settings, monitor):
 
     recip = dict(asymmetry_before=None, sinkhorn_iterations=0,
                  note="matrix-free shooting conserves energy by construction")
-    res = solve_progressive(rows_on_demand, nodes.areas, nodes.rho, nodes.le,
+    res = solve_progressive(rows_on_demand, nodes.areas, nodes.rho, nodes.source,
                             tol=settings.tolerance, max_shots=settings.max_iterations * N,
                             batch=int(np.clip(ff.batch, 1, MAX_SHOOT_BATCH)), monitor=monitor)
     st = res.stats
     incident = st["incident"]
-    active = np.any(incident > 0, axis=1) | np.any(nodes.le > 0, axis=1)
+    emitted, absorbed = st["emitted"], st["absorbed"]
+    if nodes.direct is not None:     # shooting counted rho E / pi as emission: count E instead
+        direct = nodes.direct * nodes.areas[:, None]
+        incident = incident + direct
+        emitted = emitted - (nodes.rho * direct).sum(axis=0) + direct.sum(axis=0)
+        absorbed = absorbed + ((1.0 - nodes.rho) * direct).sum(axis=0)
+    active = np.any(incident > 0, axis=1) | np.any(nodes.source > 0, axis=1)
     return Solution(res.radiance, res, "progressive", active, incident,
-                    (st["emitted"], st["absorbed"], st["escaped"]), recip, int(store.nbytes),
-                    None, [])
+                    (emitted, absorbed, st["escaped"]), recip, int(store.nbytes), None, [])
+
+
+def _direct_power(nodes):
+    """(3,) the lights' direct light arriving at the nodes (radiance x area, before pi)."""
+    if nodes.direct is None:
+        return np.zeros(3)
+    return (nodes.direct * nodes.areas[:, None]).sum(axis=0)
 
 
 @dataclass(frozen=True)
 class Gather:
-    """What the final gather keeps for relight: corner groups, their rows, receiver elements."""
+    """What the final gather keeps for relight: corner groups, their rows, receiver elements,
+    and the direct light of the point, spot and sun lights at the groups (or None)."""
 
     groups: object
     rows: RowStore
     elements: object
+    direct: np.ndarray = None
 
 
-def make_gather(scene, patches, node_radiance, settings, monitor, on_contact=None):
-    """Receiver elements (if ``element_levels``) and the gather rows at every corner group."""
+def make_gather(scene, patches, node_radiance, settings, monitor, on_contact=None, direct=None):
+    """Receiver elements (if ``element_levels``) and the gather rows at every corner group.
+
+    ``direct``: a :class:`core.lights.DirectLight`, evaluated at the groups' points.
+    """
     elements = bake_elements(scene, patches, node_radiance, settings,
-                             SubMonitor(monitor, 0.0, ELEMENT_SHARE))
+                             SubMonitor(monitor, 0.0, ELEMENT_SHARE), direct)
     seen = patches if elements is None else elements.patches
     groups = corner_groups(scene, crease_angle=settings.crease_angle, on_contact=on_contact)
     sub = SubMonitor(monitor, ELEMENT_SHARE if elements is not None else 0.0, 1.0)
     rows = gather_rows(seen, groups, resolution=settings.resolution,
                        rotate=settings.rotate_hemicube,
                        rng=np.random.default_rng([settings.seed, 2]), monitor=sub)
-    return Gather(groups, rows, elements)
+    at_points = None
+    if direct is not None:
+        at_points = direct.incident(groups.points, groups.normals)
+    return Gather(groups, rows, elements, at_points)
 
 
 def colours(scene, patches, node_radiance, settings, gather):
@@ -354,8 +392,8 @@ def colours(scene, patches, node_radiance, settings, gather):
     if np.any(gather.groups.group < 0):
         fallback = corner_colours(scene, patches, patch_radiance,
                                   crease_angle=settings.crease_angle)
-    return gathered_colours(scene, gather.groups, gather.rows, seen_radiance, fallback), \
-        element_report
+    return gathered_colours(scene, gather.groups, gather.rows, seen_radiance, fallback,
+                            gather.direct), element_report
 
 
 def check_result(scene, patches, sol):

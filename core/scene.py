@@ -13,6 +13,7 @@ import numpy as np
 from .constants import MAX_REFLECTANCE_EXCLUSIVE, tol
 from .errors import SceneError
 from .geometry import ragged
+from .lights import Lights, make_lights
 
 
 @dataclass(frozen=True, eq=False)
@@ -47,6 +48,8 @@ class Scene:
     face_duplicate_of : (F,) int64 or None
         Set by :func:`core.duplicates.merge_duplicates`: the kept face each coincident duplicate
         (marked invalid) stands for, -1 for other faces. None: not checked.
+    lights : core.lights.Lights or None
+        Point, spot and sun lights (:func:`core.lights.make_lights`); None: none.
     """
 
     vertices: np.ndarray
@@ -65,6 +68,7 @@ class Scene:
     back_reflectance: np.ndarray = None
     back_emission: np.ndarray = None
     face_duplicate_of: np.ndarray = None
+    lights: Lights = None
 
     def back_materials(self):
         """(reflectance, emission) of the back sides, (M, 3) each."""
@@ -150,7 +154,7 @@ def _first_bad_row(mask):
 
 def make_scene(vertices, corner_verts, face_starts, face_sizes, face_materials, reflectance,
                emission, *, face_objects=None, object_names=None, material_names=None,
-               back_reflectance=None, back_emission=None):
+               back_reflectance=None, back_emission=None, lights=None):
     """Validate scene arrays and derive per-face normals and areas.
 
     Parameters
@@ -173,6 +177,8 @@ def make_scene(vertices, corner_verts, face_starts, face_sizes, face_materials, 
     object_names, material_names : sequence of str, optional
     back_reflectance, back_emission : (M, 3) float, optional
         Material of the back sides (default: the same as the front). Same rules as the front.
+    lights : core.lights.Lights or sequence of dict, optional
+        Point, spot and sun lights (dicts go through :func:`core.lights.make_lights`).
 
     Returns
     -------
@@ -182,7 +188,8 @@ def make_scene(vertices, corner_verts, face_starts, face_sizes, face_materials, 
     ------
     SceneError
         Naming the argument and the offending index: wrong shapes, NaN/inf, indices out of range,
-        reflectance outside [0, 1), negative emission, an empty scene, or no emitter.
+        reflectance outside [0, 1), negative emission, an empty scene, or no emitter and no
+        light.
     """
     vertices = _as_array("vertices", vertices, np.float64, 2, 3)
     corner_verts = _as_index_array("corner_verts", corner_verts)
@@ -288,7 +295,13 @@ def make_scene(vertices, corner_verts, face_starts, face_sizes, face_materials, 
     emitting_materials = (emission > 0).any(axis=1)
     if back_emission is not None:
         emitting_materials |= (back_emission > 0).any(axis=1)
-    if not (emitting_materials[face_materials] & valid).any():
+    if lights is not None and not isinstance(lights, Lights):
+        lights = make_lights(lights)
+    if lights is not None and len(lights) == 0:
+        lights = None
+    has_light = lights is not None and (np.any(lights.intensity > 0)
+                                        or np.any(lights.sun_irradiance > 0))
+    if not (emitting_materials[face_materials] & valid).any() and not has_light:
         raise SceneError("the scene has no emitter: no valid face uses a material with emission > 0 "
                          "(add an emissive material or a light)")
 
@@ -296,7 +309,7 @@ def make_scene(vertices, corner_verts, face_starts, face_sizes, face_materials, 
         arr.setflags(write=False)
     return Scene(vertices, corner_verts, face_starts, face_sizes, face_materials, reflectance,
                  emission, face_objects, object_names, material_names, normals, areas, valid,
-                 back_reflectance, back_emission)
+                 back_reflectance, back_emission, lights=lights)
 
 
 def _newell(vertices, corner_verts, face_starts, face_sizes):

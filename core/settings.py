@@ -279,6 +279,12 @@ TABLE = (
                 "about a patch size; near an emitter that error carries most of the energy. "
                 "Measured on the office modelled coarsely (bench/compare/coarse.py): error "
                 "17.5 % -> 9.9 %, bias +11.6 % -> +0.1 % against converged Cycles."),
+    Setting("light_samples", "int", 16, "Light Samples",
+            "Shadow rays per point, spot or sun light at each output point, where the light has "
+            "a size (radius, angle): the softness of its shadows", low=1, high=1024,
+            soft=(1, 256), exposed=True,
+            doc="Points whose first 4 rays agree (fully lit or fully shadowed) cast no more: "
+                "only the penumbra pays for the samples (core.lights)."),
     Setting("vertex_budget", "int", 100_000, "Vertex Budget",
             "Radiosity mesh: most output vertices; the worst elements are split first", low=4,
             soft=(1000, 1_000_000), exposed=True,

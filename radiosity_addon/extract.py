@@ -4,7 +4,8 @@ Everything visible and renderable in the evaluated depsgraph takes part: modifie
 collection and geometry-node instances included, world transforms and the scene's unit scale
 applied. Only real (non-instance) mesh objects receive the result; instances light and shadow
 the scene but share their mesh data with their source, so nothing is written to them.
-Area lights become emitting polygons (see :func:`_area_light_faces`).
+Area lights become emitting polygons (see :func:`_add_light`); point, spot and sun lights become
+``core.lights.Lights`` (:func:`light_dict`), in ``arrays["lights"]``.
 """
 
 from dataclasses import dataclass, field
@@ -12,6 +13,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
+from ..core.lights import make_lights
 from .materials import MaterialReader, area_light_polygon, area_light_radiance
 
 #: An area light is modelled as a one-sided emitting polygon: its front emits the converted
@@ -78,7 +80,11 @@ class Part:
 
 @dataclass
 class Extraction:
-    """What :func:`extract` read: the make_scene arguments, the parts to write, the notes."""
+    """What :func:`extract` read: the make_scene arguments, the parts to write, the notes.
+
+    ``lights`` counts every light read (area, point, spot and sun), ``area_lights`` the area
+    lights among them.
+    """
 
     arrays: dict
     parts: list
@@ -86,6 +92,7 @@ class Extraction:
     notes: list = field(default_factory=list)
     instances: int = 0
     lights: int = 0
+    area_lights: int = 0
 
 
 def read_mesh_layout(mesh):
@@ -242,6 +249,9 @@ def _extract(depsgraph, selected_only):
     no_material = []
     ignored = []
     unsupported = {}             # light type -> names of lights we cannot bake
+    light_dicts = []             # point, spot and sun lights for core.make_lights
+    light_notes = {}             # approximation -> light names
+    no_diffuse = []              # lights whose diffuse ray visibility is off
 
     def material_index(mat):
         key = None if mat is None else mat.original.name_full
@@ -272,10 +282,17 @@ def _extract(depsgraph, selected_only):
         if obj.type == "LIGHT":
             if obj.original.hide_render:
                 continue
-            if obj.data.type != "AREA":
-                unsupported.setdefault(obj.data.type.capitalize(), []).append(obj.name)
+            if not getattr(obj, "visible_diffuse", True):
+                # Cycles: a light without diffuse ray visibility lights no diffuse surface.
+                no_diffuse.append(obj.name)
                 continue
-            _add_light(inst, unit, out, add_faces, object_names, rho, le, mat_keys, one_sided)
+            if obj.data.type in LIGHT_KINDS:
+                light_dicts.append(light_dict(inst, light_notes))
+                out.lights += 1
+            elif obj.data.type == "AREA":
+                _add_light(inst, unit, out, add_faces, object_names, rho, le, mat_keys, one_sided)
+            else:
+                unsupported.setdefault(obj.data.type.capitalize(), []).append(obj.name)
             continue
         if not _is_visible(inst, view_layer, selected_only):
             continue
@@ -328,6 +345,10 @@ def _extract(depsgraph, selected_only):
         out.warnings.append(world_note)
     out.warnings.extend(f"{kind} lights are not supported yet and were ignored: {_names(names)}"
                         for kind, names in unsupported.items())
+    out.warnings.extend(f"{what}: {_names(names)}" for what, names in light_notes.items())
+    if no_diffuse:
+        out.notes.append(f"Lights with Diffuse ray visibility off light no diffuse surface (as "
+                         f"in Cycles) and were left out: {_names(no_diffuse)}")
     out.notes.extend(reader.notes)
     if verts:
         out.arrays = dict(
@@ -343,6 +364,116 @@ def _extract(depsgraph, selected_only):
             back_rho[one_sided] = 0.0
             back_le[one_sided] = 0.0
             out.arrays.update(back_reflectance=back_rho, back_emission=back_le)
+        if light_dicts:
+            # Cycles works in Blender units whatever the unit scale: the lights keep their
+            # irradiance at Blender-unit distances (positions and radii in metres, intensity
+            # times scale^2) -- measured, see tests/addon/test_lights.py.
+            out.arrays["lights"] = make_lights(light_dicts).scaled(scale)
+    return out
+
+
+#: Blender light types read as core.lights kinds (AREA lights are polygons, _add_light).
+LIGHT_KINDS = {"POINT": "point", "SPOT": "spot", "SUN": "sun"}
+
+#: Relative spread of a spot light's three world scale factors above which its cone is not round
+#: (Cycles scales the cone with the object; the core's cone is round).
+SPOT_SCALE_RTOL = 1e-4
+
+
+def _light_power(light):
+    """Power and colour (3,) of a light as Cycles uses them.
+
+    Power: energy x 2^exposure; colour: colour x blackbody colour when ``use_temperature``
+    (exposure and temperature exist from Blender 4.5 on). ``diffuse_factor`` is left out: Cycles
+    ignores it (an EEVEE setting; measured with bpy 4.2 and 5.0.1, tests/addon/test_lights.py).
+    """
+    colour = np.array(light.color[:3], dtype=np.float64)
+    if getattr(light, "use_temperature", False):
+        colour = colour * np.array(light.temperature_color[:3], dtype=np.float64)
+    return float(light.energy) * 2.0 ** float(getattr(light, "exposure", 0.0)), colour
+
+
+def _unnormalized(light, kind, radius):
+    """Cycles' factor on the power of a light whose ``normalize`` is off (Blender 4.4 on).
+
+    Measured with bpy 5.0.1 (tests/addon/test_lights.py): a point or spot light of radius r > 0
+    is not divided by its area, 4 pi r^2 (x 4 at r = 0); a sun of angle a > 0 is not divided by
+    its disk, pi sin^2(a / 2) (x 1 at a = 0).
+    """
+    if getattr(light, "normalize", True):
+        return 1.0
+    if kind == "sun":
+        half = 0.5 * float(light.angle)
+        return float(np.pi * np.sin(half) ** 2) if half > 0 else 1.0
+    return 4.0 * np.pi * radius * radius if radius > 0 else 4.0
+
+
+def _nodes_matter(light):
+    """Whether a light's node tree may change its light: anything but the default tree (an
+    unlinked white Emission of strength 1 into the Light Output)."""
+    tree = light.node_tree if getattr(light, "use_nodes", False) else None
+    if tree is None:
+        return False
+    outs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputLight"
+            and getattr(n, "is_active_output", True)]
+    if not outs:
+        return False
+    surface = outs[0].inputs.get("Surface")
+    if surface is None or not surface.is_linked:
+        return True
+    node = surface.links[0].from_node
+    if node.bl_idname != "ShaderNodeEmission":
+        return True
+    colour, strength = node.inputs["Color"], node.inputs["Strength"]
+    return (colour.is_linked or strength.is_linked or tuple(colour.default_value[:3]) != (1, 1, 1)
+            or strength.default_value != 1.0)
+
+
+def light_dict(inst, notes=None):
+    """A point, spot or sun light instance as a :func:`core.lights.make_lights` dict.
+
+    In Blender units (``Lights.scaled`` converts to metres). The light's radius is not scaled
+    by the object's scale, as in Cycles (measured). A light node tree is ignored and a spot's
+    non-uniform scale is read as a round cone; both are added to *notes* (dict: approximation ->
+    light names).
+
+    Parameters
+    ----------
+    inst : bpy.types.DepsgraphObjectInstance
+        An instance of a light object of type POINT, SPOT or SUN.
+    notes : dict or None
+
+    Returns
+    -------
+    dict
+    """
+    obj, light = inst.object, inst.object.data
+    kind = LIGHT_KINDS[light.type]
+    matrix = np.array(inst.matrix_world, dtype=np.float64)
+    axis = -matrix[:3, 2]
+    norm = np.linalg.norm(axis)
+    direction = axis / norm if norm > 0 else np.array([0.0, 0.0, -1.0])
+    power, colour = _light_power(light)
+    out = dict(kind=kind, name=obj.name, color=colour,
+               shadow=bool(getattr(light, "use_shadow", True)))
+    if notes is not None and _nodes_matter(light):
+        notes.setdefault("Light node trees are not supported yet and were ignored (colour and "
+                         "power used)", []).append(obj.name)
+    if kind == "sun":
+        out.update(direction=direction, strength=power * _unnormalized(light, kind, 0.0),
+                   angle=float(light.angle))
+        return out
+    radius = float(light.shadow_soft_size)
+    out.update(position=matrix[:3, 3].copy(), radius=radius,
+               power=power * _unnormalized(light, kind, radius),
+               soft_falloff=bool(getattr(light, "use_soft_falloff", True)))
+    if kind == "spot":
+        out.update(direction=direction, spot_size=float(light.spot_size),
+                   spot_blend=float(light.spot_blend))
+        scales = np.linalg.norm(matrix[:3, :3], axis=0)
+        if notes is not None and scales.max() > scales.min() * (1.0 + SPOT_SCALE_RTOL):
+            notes.setdefault("Spot lights with non-uniform scale are not supported yet and were "
+                             "baked with a round cone", []).append(obj.name)
     return out
 
 
@@ -367,6 +498,7 @@ def _add_light(inst, unit, out, add_faces, object_names, rho, le, mat_keys, one_
     add_faces(pts, np.arange(k, dtype=np.int64), np.array([0]), np.array([k]),
               np.array([mat_keys[emit_key]]), obj_index)
     out.lights += 1
+    out.area_lights += 1
 
 
 def _material_name(key):

@@ -77,13 +77,16 @@ def prepare(context, options):
     except (RadiosityError, ValueError, TypeError) as exc:
         raise BakeError(f"Invalid bake setting: {exc}") from exc
     depsgraph = context.evaluated_depsgraph_get()
-    ext = extract(depsgraph, selected_only=options["selected_only"])
+    try:
+        ext = extract(depsgraph, selected_only=options["selected_only"])
+    except RadiosityError as exc:        # a light core.make_lights refuses (negative power)
+        raise BakeError(str(exc)) from exc
     if not ext.parts:
         what = "selected mesh objects" if options["selected_only"] else "visible mesh objects"
         raise BakeError(f"Nothing to bake: no {what} with faces")
-    if not (ext.arrays["emission"][ext.arrays["face_materials"]] > 0).any():
+    if not _has_light(ext.arrays):
         unsupported = "; ".join(w for w in ext.warnings if "not supported" in w)
-        raise BakeError("No light: add an emissive material or an area light"
+        raise BakeError("No light: add an emissive material or a light"
                         + (f" ({unsupported})" if unsupported else ""))
     try:
         scene = core.make_scene(**ext.arrays)
@@ -97,6 +100,15 @@ def prepare(context, options):
         raise BakeError(str(exc)) from exc
     return BakeInput(scene, settings, ext, context.scene.name, options["make_single_user"],
                      time.perf_counter() - t0)
+
+
+def _has_light(arrays):
+    """Whether anything emits: an emissive face or a point, spot or sun light of power > 0."""
+    if (arrays["emission"][arrays["face_materials"]] > 0).any():
+        return True
+    lights = arrays.get("lights")
+    return lights is not None and bool((lights.intensity > 0).any()
+                                       or (lights.sun_irradiance > 0).any())
 
 
 def compute(bake_input, progress=None, cancel=None):
@@ -116,7 +128,7 @@ def make_report(bake_input, result, write_seconds):
     report["settings"] = as_dict(bake_input.settings)
     report["objects"] = len(ext.parts)
     report["instances"] = ext.instances
-    report["area_lights"] = ext.lights
+    report["area_lights"] = ext.area_lights
     report.setdefault("timings", {})
     report["timings"]["read_scene"] = bake_input.read_seconds
     report["timings"]["write"] = write_seconds

@@ -17,6 +17,7 @@ STAGE_LABELS = (
     ("total", "Total"),
     ("read_scene", "Read scene"),
     ("patches", "Make patches"),
+    ("lights", "Direct light"),
     ("form_factors", "Form factors"),
     ("solve", "Solve"),
     ("colours", "Vertex colours"),
@@ -106,6 +107,7 @@ def draw_advanced(layout, props):
     col = layout.column(align=True)
     col.prop(props, "tolerance")
     col.prop(props, "max_iterations", text="Iteration Cap")
+    layout.prop(props, "light_samples")
     col = layout.column()
     col.prop(props, "contact_cuts")
     col.prop(props, "selected_only")

@@ -1,0 +1,456 @@
+"""Point, spot and sun lights: direct light at points, with shadow rays, in Cycles' units.
+
+Lights that are not surfaces are *shot first* (the usual treatment of point sources in radiosity):
+their irradiance ``E`` is computed at every receiver with shadow rays, and enters the solve as the
+first bounce, ``Le + rho E / pi`` per node (:class:`core.pipeline.Nodes`); the output points add
+``E / pi`` to what their hemicube gathers. The hemicube never sees these lights, so no small
+source is aliased.
+
+Units (measured against Cycles bakes with bpy 5.0.1, ``tests/addon/test_lights.py``):
+
+* point and spot: radiant intensity ``I = power x colour / (4 pi)`` (W/sr, Blender's power is the
+  power of an isotropic point source; a spot keeps the intensity of the point light of the same
+  power and cuts it to its cone). ``E = I cos(theta) / d^2``. With *soft falloff* (Blender 4.0 on,
+  the default) and radius ``r``: ``E = I cos(theta) / (d^2 + r^2)``, the irradiance of a disk of
+  radius r facing the receiver.
+* spot cone: ``smoothstep((cos(a) - cos(size / 2)) / ((1 - cos(size / 2)) x blend))``, 1 inside
+  the blend, 0 outside the cone, with no cosine falloff across the cone (a is the angle from the
+  spot's axis);
+* sun: ``E = strength x colour x cos(theta)`` (strength in W/m^2).
+
+Soft shadows: the visible fraction of the light, sampled over a disk of the light's radius facing
+the receiver (point, spot) or over the cone of the sun's angular diameter: ``samples`` shadow rays
+per light and point, cast in two rounds; points whose first ``FIRST_ROUND`` rays (a ring near the
+light's rim) and the ray to the light's centre agree take that answer (no penumbra there), the
+rest cast ``samples`` more. Deterministic: the sample pattern is a
+fixed spiral, turned per point by a hash of the point's position.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import SceneError
+from .exact import ray_triangles
+from .raycast import any_hit, build_bvh
+
+KINDS = ("point", "spot", "sun")
+
+#: Shadow rays per light and point in the first round, on a ring at RIM x the light's radius (and
+#: one to its centre); a point whose first-round rays all agree (lit, or shadowed) casts no
+#: more. A straight shadow edge can then hide at most a 2.5 % segment of the light's disk from
+#: the first round (8 points at 0.95: the chord beyond 0.95 cos 22.5 deg).
+FIRST_ROUND = 8
+RIM = 0.95
+
+#: Sample points per patch (ORDER x ORDER, Gauss-Legendre on the patch's bilinear map) for the
+#: patches' mean irradiance, and shadow rays per sample point and light there (the mean over the
+#: patch smooths the penumbra).
+PATCH_ORDER = 3
+PATCH_SAMPLES = 4
+
+#: Shadow rays leave the receiver this far (relative to the scene's extent, at least 1 m x this)
+#: along its normal, so that they do not hit the receiver's own surface.
+RAY_OFFSET = 1e-6
+
+#: A light's centre-visibility bit per light, in the bits above the emitter samples' bits
+#: (core.criteria): lights beyond this many share bits (modulo).
+VISIBILITY_BITS = 40
+
+
+@dataclass(frozen=True, eq=False)
+class Lights:
+    """Point, spot and sun lights as arrays (build with :func:`make_lights`).
+
+    Attributes
+    ----------
+    names : tuple of str
+        Every light, point and spot lights first, then suns.
+    position : (n, 3) float64
+        Point and spot lights.
+    intensity : (n, 3) float64
+        Radiant intensity (W/sr), RGB.
+    radius : (n,) float64
+    soft : (n,) bool
+        Soft falloff: ``d^2 + r^2`` in the denominator.
+    axis : (n, 3) float64
+        Spot direction (unit); zero for point lights.
+    cos_half : (n,) float64
+        Cosine of the half cone angle; -1 for point lights.
+    smooth : (n,) float64
+        Width of the cone's soft edge in cosine: ``(1 - cos_half) x blend``.
+    shadow : (n + m,) bool
+        The light casts shadows.
+    sun_direction : (m, 3) float64
+        Unit vector towards each sun.
+    sun_irradiance : (m, 3) float64
+        W/m^2 on a surface facing the sun, RGB.
+    sun_half_angle : (m,) float64
+        Half the sun's angular diameter (rad).
+    """
+
+    names: tuple
+    position: np.ndarray
+    intensity: np.ndarray
+    radius: np.ndarray
+    soft: np.ndarray
+    axis: np.ndarray
+    cos_half: np.ndarray
+    smooth: np.ndarray
+    shadow: np.ndarray
+    sun_direction: np.ndarray
+    sun_irradiance: np.ndarray
+    sun_half_angle: np.ndarray
+
+    @property
+    def n_points(self):
+        return int(self.position.shape[0])
+
+    @property
+    def n_suns(self):
+        return int(self.sun_direction.shape[0])
+
+    def __len__(self):
+        return self.n_points + self.n_suns
+
+    def scaled(self, factor):
+        """The same lights with every length times ``factor`` (intensity x factor^2: the
+        irradiance at the scaled distances is unchanged)."""
+        return Lights(self.names, self.position * factor, self.intensity * factor ** 2,
+                      self.radius * factor, self.soft, self.axis, self.cos_half, self.smooth,
+                      self.shadow, self.sun_direction, self.sun_irradiance, self.sun_half_angle)
+
+    def power(self):
+        """(3,) total power (W) of the point and spot lights as if isotropic (4 pi I)."""
+        return 4.0 * np.pi * self.intensity.sum(axis=0)
+
+
+def _vec(light, key, label, default=None, length=3):
+    value = light.get(key, default)
+    if value is None:
+        raise SceneError(f"{label}: missing '{key}'")
+    try:
+        arr = np.array(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise SceneError(f"{label}: '{key}' must be numbers; got {value!r}") from None
+    if arr.size != length or not np.all(np.isfinite(arr)):
+        raise SceneError(f"{label}: '{key}' must be {length} finite number(s); got {value!r}")
+    return arr if length > 1 else float(arr[0])
+
+
+def make_lights(lights):
+    """Validate lights given in Blender's terms and convert them to :class:`Lights`.
+
+    Parameters
+    ----------
+    lights : sequence of dict
+        Each has ``kind`` ('point', 'spot' or 'sun'), ``name`` (for messages), ``color`` (RGB,
+        default white) and:
+
+        * point, spot: ``position`` (m), ``power`` (W), ``radius`` (m, default 0),
+          ``soft_falloff`` (default True);
+        * spot: also ``direction`` (the way it points), ``spot_size`` (full cone angle, rad, in
+          (0, pi]) and ``spot_blend`` (in [0, 1]);
+        * sun: ``direction`` (the way the light travels, Blender's -Z of the sun object),
+          ``strength`` (W/m^2) and ``angle`` (angular diameter, rad, default 0);
+        * any: ``shadow`` (casts shadows, default True).
+
+    Returns
+    -------
+    Lights
+
+    Raises
+    ------
+    SceneError
+        Naming the light and the field at fault.
+    """
+    points, suns = [], []
+    for i, light in enumerate(lights):
+        if not isinstance(light, dict):
+            raise SceneError(f"light {i} must be a dict; got {type(light).__name__}")
+        name = str(light.get("name", f"light {i}"))
+        label = f'light "{name}"'
+        kind = light.get("kind")
+        if kind not in KINDS:
+            raise SceneError(f"{label}: kind must be one of {KINDS}; got {kind!r}")
+        color = _vec(light, "color", label, (1.0, 1.0, 1.0))
+        if np.any(color < 0):
+            raise SceneError(f"{label}: color must be >= 0; got {color.tolist()}")
+        shadow = bool(light.get("shadow", True))
+        if kind == "sun":
+            d = _vec(light, "direction", label)
+            n = np.linalg.norm(d)
+            if n == 0:
+                raise SceneError(f"{label}: direction must be non-zero")
+            strength = _vec(light, "strength", label, length=1)
+            angle = _vec(light, "angle", label, 0.0, length=1)
+            if strength < 0:
+                raise SceneError(f"{label}: strength must be >= 0 W/m^2; got {strength}")
+            if not 0 <= angle < np.pi:
+                raise SceneError(f"{label}: angle must lie in [0, pi) rad; got {angle}")
+            suns.append((name, -d / n, strength * color, angle / 2, shadow))
+            continue
+        pos = _vec(light, "position", label)
+        power = _vec(light, "power", label, length=1)
+        radius = _vec(light, "radius", label, 0.0, length=1)
+        if power < 0:
+            raise SceneError(f"{label}: power must be >= 0 W; got {power}")
+        if radius < 0:
+            raise SceneError(f"{label}: radius must be >= 0 m; got {radius}")
+        axis, cos_half, smooth = np.zeros(3), -1.0, 0.0
+        if kind == "spot":
+            d = _vec(light, "direction", label)
+            n = np.linalg.norm(d)
+            if n == 0:
+                raise SceneError(f"{label}: direction must be non-zero")
+            size = _vec(light, "spot_size", label, length=1)
+            blend = _vec(light, "spot_blend", label, 0.0, length=1)
+            if not 0 < size <= np.pi:
+                raise SceneError(f"{label}: spot_size must lie in (0, pi] rad; got {size}")
+            if not 0 <= blend <= 1:
+                raise SceneError(f"{label}: spot_blend must lie in [0, 1]; got {blend}")
+            axis, cos_half = d / n, float(np.cos(size / 2))
+            smooth = (1.0 - cos_half) * blend
+        points.append((name, pos, power * color / (4 * np.pi), radius,
+                       bool(light.get("soft_falloff", True)), axis, cos_half, smooth, shadow))
+
+    def col(rows, k, shape):
+        return np.array([r[k] for r in rows], dtype=np.float64).reshape(shape)
+
+    n, m = len(points), len(suns)
+    return Lights(
+        names=tuple(p[0] for p in points) + tuple(s[0] for s in suns),
+        position=col(points, 1, (n, 3)), intensity=col(points, 2, (n, 3)),
+        radius=col(points, 3, (n,)), soft=np.array([p[4] for p in points], dtype=bool),
+        axis=col(points, 5, (n, 3)), cos_half=col(points, 6, (n,)), smooth=col(points, 7, (n,)),
+        shadow=np.array([p[8] for p in points] + [s[4] for s in suns], dtype=bool),
+        sun_direction=col(suns, 1, (m, 3)), sun_irradiance=col(suns, 2, (m, 3)),
+        sun_half_angle=col(suns, 3, (m,)))
+
+
+def spot_factor(cos_angle, cos_half, smooth):
+    """Cycles' spot cone: 0 outside, smoothstep across the blend, 1 inside (vectorised)."""
+    cos_angle = np.asarray(cos_angle, dtype=np.float64)
+    if smooth <= 0:
+        return (cos_angle > cos_half).astype(np.float64)
+    x = np.clip((cos_angle - cos_half) / smooth, 0.0, 1.0)
+    return np.where(cos_angle > cos_half, x * x * (3.0 - 2.0 * x), 0.0)
+
+
+def _spiral(k):
+    """(k, 2) points of a Vogel spiral filling the unit disk evenly (centre excluded)."""
+    i = np.arange(k) + 0.5
+    r = np.sqrt(i / k)
+    a = i * np.pi * (3.0 - np.sqrt(5.0))
+    return np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
+
+
+def _frame(d):
+    """Two unit vectors (n, 3) each perpendicular to the unit rows of ``d`` and to each other."""
+    helper = np.where(np.abs(d[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    e1 = np.cross(d, helper)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    return e1, np.cross(d, e1)
+
+
+def _turn(points):
+    """(n,) angle per point from a hash of its position: decorrelates the spirals of
+    neighbouring points, deterministically."""
+    h = np.sin(points @ np.array([12.9898, 78.233, 37.719])) * 43758.5453
+    return 2.0 * np.pi * (h - np.floor(h))
+
+
+class DirectLight:
+    """Direct light of a scene's :class:`Lights` at points, with shadow rays.
+
+    Parameters
+    ----------
+    lights : Lights
+    patches : core.patches.Patches
+        What casts shadows (every patch; emitters included).
+    samples : int
+        Shadow rays per light and point where the light has a size (radius or angle).
+    """
+
+    def __init__(self, lights, patches, samples=16):
+        self.lights = lights
+        self.samples = int(samples)
+        tris = ray_triangles(patches)[0]
+        self.bvh = build_bvh(tris)
+        extent = float(np.ptp(patches.corners.reshape(-1, 3), axis=0).max())
+        self.offset = RAY_OFFSET * max(extent, 1.0)
+        self.extent = max(extent, np.finfo(float).tiny)
+        self.rays = 0
+        self._patch_cache = None
+
+    def __len__(self):
+        return len(self.lights)
+
+    def incident(self, points, normals, *, samples=None, bits=False):
+        """Irradiance / pi at ``points`` facing ``normals`` (n, 3): the radiance-equivalent that
+        the gathers' ``incident`` holds. With ``bits``: also (n,) int64, bit j set when light j's
+        centre (direction, for a sun) lights the point unshadowed."""
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        n = points.shape[0]
+        out = np.zeros((n, 3))
+        vis_bits = np.zeros(n, dtype=np.int64)
+        for j, _, scale, centre in self._per_light(points, normals, samples):
+            out += scale[:, None] * self._colour(j)[None, :]
+            vis_bits |= centre.astype(np.int64) << (j % VISIBILITY_BITS)
+        out /= np.pi
+        return (out, vis_bits) if bits else out
+
+    def _colour(self, j):
+        lt = self.lights
+        return lt.intensity[j] if j < lt.n_points else lt.sun_irradiance[j - lt.n_points]
+
+    def _per_light(self, points, normals, samples):
+        """Per light j: (j, bare, scale, centre), each (n,): ``bare`` the point light's
+        cos / d^2 (a sun's cos) before shadows, cone and soft falloff, ``scale`` the factor of
+        the light's colour in the irradiance, ``centre`` the light's centre lights the point."""
+        normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+        k = self.samples if samples is None else int(samples)
+        lt = self.lights
+        n = points.shape[0]
+        if n == 0:
+            return
+        origin = points + self.offset * normals
+        turn = _turn(points / self.extent)          # the same pattern at any scale
+        for j in range(len(lt)):
+            if j < lt.n_points:
+                d = lt.position[j] - origin
+                dist2 = np.einsum("ij,ij->i", d, d)
+                dist = np.sqrt(dist2)
+                ldir = d / np.maximum(dist, 1e-300)[:, None]
+                cos_r = np.einsum("ij,ij->i", ldir, normals)
+                r = lt.radius[j]
+                bare = np.where(cos_r > 0, cos_r / np.maximum(dist2, 1e-300), 0.0)
+                fall = dist2 + (r * r if lt.soft[j] else 0.0)
+                scale = np.where(cos_r > 0, cos_r / np.maximum(fall, 1e-300), 0.0)
+                if lt.cos_half[j] > -1.0:
+                    scale *= spot_factor(-(ldir @ lt.axis[j]), lt.cos_half[j], lt.smooth[j])
+                size = r
+            else:
+                s = j - lt.n_points
+                ldir = np.broadcast_to(lt.sun_direction[s], origin.shape)
+                cos_r = normals @ lt.sun_direction[s]
+                bare = np.maximum(cos_r, 0.0)
+                scale = bare.copy()
+                size = np.tan(lt.sun_half_angle[s])
+                dist = None
+            centre = scale > 0
+            go = np.flatnonzero(centre)
+            if go.size and lt.shadow[j] and np.any(self._colour(j) > 0):
+                frac, clear = self._visible(origin[go], ldir[go], dist if dist is None
+                                            else dist[go], size, k if size > 0 else 1, turn[go])
+                scale[go] *= frac
+                centre[go] = clear
+            yield j, bare, scale, centre
+
+    def _visible(self, origin, ldir, dist, size, k, turn):
+        """Visible fraction (n,) of a light of radius (angle tangent) ``size`` and whether the
+        ray to its centre is clear (n,) bool."""
+        n = origin.shape[0]
+        if k <= 1 or size <= 0:
+            clear = ~self._shadowed(origin, ldir, dist, np.zeros((n, 3)))
+            self.rays += n
+            return clear.astype(np.float64), clear
+        e1, e2 = _frame(ldir)
+        c, s = np.cos(turn)[:, None], np.sin(turn)[:, None]
+
+        def visible(rows, disk):
+            """(len(rows), len(disk)) bool: the rays to the disk's points are clear."""
+            u = c[rows] * disk[None, :, 0] - s[rows] * disk[None, :, 1]
+            v = s[rows] * disk[None, :, 0] + c[rows] * disk[None, :, 1]
+            off = size * (u[..., None] * e1[rows, None] + v[..., None] * e2[rows, None])
+            m = disk.shape[0]
+            p = np.repeat(rows, m)
+            self.rays += p.size
+            return ~self._shadowed(origin[p], ldir[p], None if dist is None else dist[p],
+                                   off.reshape(-1, 3)).reshape(rows.size, m)
+
+        centre = ~self._shadowed(origin, ldir, dist, np.zeros((n, 3)))
+        self.rays += n
+        everyone = np.arange(n)
+        if k > FIRST_ROUND:
+            a = 2.0 * np.pi * np.arange(FIRST_ROUND) / FIRST_ROUND
+            ring = RIM * np.stack([np.cos(a), np.sin(a)], axis=1)
+        else:
+            ring = _spiral(k)
+        first = visible(everyone, ring)
+        lit = first.sum(axis=1) + centre
+        frac = first.mean(axis=1)
+        mixed = np.flatnonzero((lit > 0) & (lit < first.shape[1] + 1))
+        if mixed.size and k > FIRST_ROUND:
+            frac[mixed] = visible(mixed, _spiral(k)).mean(axis=1)
+        return frac, centre
+
+    def _shadowed(self, origin, ldir, dist, offset):
+        """Shadow rays from ``origin`` towards the light's centre moved by ``offset`` (in the
+        light's disk for a point light; a direction change for a sun)."""
+        if dist is None:                              # sun: a direction, no end
+            d = ldir + offset
+            return any_hit(self.bvh, origin, d, t_max=np.inf)
+        d = ldir * dist[:, None] + offset
+        return any_hit(self.bvh, origin, d, t_max=1.0 - 1e-9)
+
+    def patch_incident(self, patches, two_sided=True):
+        """(2P, 3): mean irradiance / pi over every patch, front nodes then back nodes.
+
+        ``PATCH_ORDER`` x ``PATCH_ORDER`` Gauss points per patch (weighted by the bilinear map's
+        area element), ``PATCH_SAMPLES`` shadow rays per light at each. Kept for the last
+        ``patches`` asked (a relight asks again).
+        """
+        cached = self._patch_cache
+        if cached is not None and cached[0] is patches and cached[1] == two_sided:
+            return cached[2]
+        out = self._patch_incident(patches, two_sided)
+        self._patch_cache = (patches, two_sided, out)
+        return out
+
+    def _patch_incident(self, patches, two_sided):
+        P = patches.areas.size
+        g, w = np.polynomial.legendre.leggauss(PATCH_ORDER)
+        g, w = (g + 1) / 2, w / 2
+        u, v = np.repeat(g, PATCH_ORDER), np.tile(g, PATCH_ORDER)
+        wt = np.outer(w, w).ravel()
+        c = np.asarray(patches.corners, dtype=np.float64)
+        c0, c1, c2, c3 = (c[:, None, i] for i in range(4))
+        uu, vv = u[None, :, None], v[None, :, None]
+        pts = (1 - uu) * (1 - vv) * c0 + uu * (1 - vv) * c1 + uu * vv * c2 + (1 - uu) * vv * c3
+        du = (1 - vv) * (c1 - c0) + vv * (c2 - c3)
+        dv = (1 - uu) * (c3 - c0) + uu * (c2 - c1)
+        jac = np.linalg.norm(np.cross(du, dv), axis=-1) * wt[None]          # (P, R)
+        jac /= np.maximum(jac.sum(axis=1, keepdims=True), 1e-300)
+        R = u.size
+        nrm = np.repeat(patches.normals, R, axis=0)
+        flat = pts.reshape(-1, 3)
+        out = np.zeros((2 * P, 3))
+        sides = [(0, 1.0)] + ([(P, -1.0)] if two_sided else [])
+        for start, sign in sides:
+            for j, bare, scale, _ in self._per_light(flat, sign * nrm, PATCH_SAMPLES):
+                bare = np.einsum("pr,pr->p", jac, bare.reshape(P, R))
+                scale = np.einsum("pr,pr->p", jac, scale.reshape(P, R))
+                if j < self.lights.n_points:
+                    # The unshadowed integral of cos / d^2 over a flat patch is the solid angle
+                    # it subtends at the light: exact; the samples give only the fraction that
+                    # shadows, the cone and the soft falloff leave of it.
+                    exact = sign * _solid_angle(c, self.lights.position[j]) / patches.areas
+                    scale = np.where(bare > 0, np.maximum(exact, 0.0) * scale
+                                     / np.maximum(bare, 1e-300), scale)
+                out[start:start + P] += scale[:, None] * self._colour(j)[None, :]
+        return out / np.pi
+
+
+def _solid_angle(corners, p):
+    """(P,) solid angle of every patch (P, 4, 3) seen from point ``p``, positive when ``p`` lies
+    on the side its normal points to (Van Oosterom & Strackee 1983, two triangles per patch)."""
+    out = np.zeros(corners.shape[0])
+    for t in ((0, 1, 2), (0, 2, 3)):
+        a, b, c = (corners[:, i] - p for i in t)
+        la, lb, lc = (np.linalg.norm(x, axis=1) for x in (a, b, c))
+        triple = np.einsum("ij,ij->i", a, np.cross(b, c))
+        den = la * lb * lc + np.einsum("ij,ij->i", a, b) * lc \
+            + np.einsum("ij,ij->i", a, c) * lb + np.einsum("ij,ij->i", b, c) * la
+        out -= 2.0 * np.arctan2(triple, den)
+    return out

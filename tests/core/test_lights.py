@@ -1,0 +1,223 @@
+"""Point, spot and sun lights (issue 12): direct light shot first, then the solve.
+
+Oracles, none of them the engine:
+
+* closed forms of the direct light on a floor that sees no other lit surface: the point light's
+  ``I cos / d^2`` (soft falloff ``I cos / (d^2 + r^2)``), the spot's cone (smoothstep across the
+  blend), the sun's ``S cos``;
+* the umbra of a black plate (exactly 0) and the penumbra of its straight edge under a disk light:
+  the visible fraction of a disk cut by a line, ``(acos t - t sqrt(1 - t^2)) / pi``;
+* energy: a point light inside a closed box puts all of its power ``4 pi I`` on the walls, and
+  with reflectance rho everywhere the walls' total exitance is ``rho / (1 - rho)`` times it;
+* invariances: the scene scaled (lights with it) bakes the same; a relight with nothing changed
+  gives the same colours; the matrix-free solve agrees with the dense one.
+"""
+
+import numpy as np
+import pytest
+
+from core.bake import bake, relight
+from core.errors import SceneError
+from core.lights import DirectLight, make_lights, spot_factor
+from core.patches import make_patches
+from core.scene import scene_from_polygons
+from core.settings import BakeSettings
+
+RHO = 0.5
+
+#: Unshadowed direct light on a lone floor: the gather adds nothing (the floor sees no lit
+#: surface), so what differs is where the light is evaluated: a corner's gather point sits
+#: core.gather.INSET (1e-3) x the face's size inside the face, and the light changes by up to
+#: 2 x (inset / distance) across that (measured 6.6e-4 at most): 2e-3.
+DIRECT_RTOL = 2e-3
+
+#: Closed box: the walls' total exitance against rho / (1 - rho) x power. The direct part is
+#: exact (solid angles); what remains is the hemicube's row sums (reciprocity enforced) and the
+#: solver tolerance: 1 %.
+ENERGY_RTOL = 0.01
+
+#: Penumbra: 64 shadow rays per point give the visible fraction to about 1/64 at a point (a
+#: fixed spiral, turned per point); the mean over the penumbra's points is held to 0.02 of the
+#: unshadowed value, the worst point to 0.08.
+PENUMBRA_MEAN, PENUMBRA_MAX = 0.02, 0.08
+
+
+def _floor(size=4.0, z=0.0, lights=(), extra=(), rho=RHO, extra_rho=0.0):
+    h = size / 2
+    V = [[-h, -h, z], [h, -h, z], [h, h, z], [-h, h, z]]
+    F = [[0, 1, 2, 3]]
+    mats = [0]
+    for quad in extra:
+        F.append([len(V) + i for i in range(4)])
+        V.extend(quad)
+        mats.append(1)
+    return scene_from_polygons(np.array(V, float), F, mats, [[rho] * 3, [extra_rho] * 3],
+                               [[0, 0, 0], [0, 0, 0]], lights=list(lights))
+
+
+def _output(result):
+    m = result.output
+    return m.vertices[m.corner_verts], m.corner_colours, m.face_parent[m.face_of_corner()]
+
+
+def _point_closed_form(lights, pts, j=0):
+    d = lights.position[j] - pts
+    dist = np.linalg.norm(d, axis=1)
+    cos = np.maximum(d[:, 2] / dist, 0)
+    r = lights.radius[j]
+    e = lights.intensity[j, 0] * cos / (dist ** 2 + (r * r if lights.soft[j] else 0.0))
+    if lights.cos_half[j] > -1:
+        e = e * spot_factor(-(d / dist[:, None]) @ lights.axis[j], lights.cos_half[j],
+                            lights.smooth[j])
+    return e
+
+
+POINT = dict(kind="point", name="Bulb", position=(0.3, 0.2, 1.5), power=100.0)
+SOFT = dict(POINT, radius=0.25)
+SPOT = dict(kind="spot", name="Spot", position=(0.3, 0.2, 1.5), power=100.0,
+            direction=(0.3, 0.0, -1.0), spot_size=np.radians(60), spot_blend=0.3)
+SUN = dict(kind="sun", name="Sun", direction=(0.5, 0.2, -1.0), strength=3.0, color=(1, .9, .8))
+
+
+@pytest.mark.parametrize("light", [POINT, SOFT, SPOT, SUN], ids=["point", "soft", "spot", "sun"])
+@pytest.mark.parametrize("mode", ["mesh", "vertices"])
+def test_direct_light_on_a_lone_floor_matches_the_closed_form(light, mode):
+    scene = _floor(lights=[light])
+    result = bake(scene, BakeSettings(output_mode=mode))
+    if mode == "mesh":
+        pts, colours, _ = _output(result)
+    else:
+        pts, colours = scene.vertices[scene.corner_verts], result.corner_colours
+    lights = scene.lights
+    if light["kind"] == "sun":
+        e = lights.sun_irradiance[0][None, :] * lights.sun_direction[0, 2] * np.ones((len(pts), 1))
+    else:
+        e = _point_closed_form(lights, pts)[:, None] * np.ones((1, 3))
+    want = RHO * e / np.pi
+    # Across the spot's blend the light changes by ~15 x its value per metre: the gather point's
+    # inset moves it by up to 1 % of the pool's light there.
+    atol = (0.01 if light["kind"] == "spot" else DIRECT_RTOL) * want.max()
+    np.testing.assert_allclose(colours, want, rtol=DIRECT_RTOL, atol=atol)
+    assert result.report["lights"]["names"] == [light["name"]]
+
+
+def test_the_spot_pool_is_refined_and_the_dark_floor_is_not():
+    """The radiosity mesh spends its vertices on the spot's edge: the mesh is fine where the
+    cone's edge crosses the floor and coarse far outside it."""
+    scene = _floor(lights=[dict(SPOT, direction=(0, 0, -1), position=(0, 0, 1.5))])
+    result = bake(scene, BakeSettings())
+    m = result.output
+    r = np.linalg.norm(m.vertices[:, :2], axis=1)
+    edge = 1.5 * np.tan(np.radians(30))
+    near_edge = np.count_nonzero(np.abs(r - edge) < 0.15)
+    far = np.count_nonzero(r > edge + 0.6)
+    area_near = np.pi * ((edge + 0.15) ** 2 - (edge - 0.15) ** 2)
+    area_far = 16.0 - np.pi * (edge + 0.6) ** 2
+    assert near_edge / area_near > 10 * far / area_far
+
+
+def test_umbra_is_black_and_the_open_floor_unshadowed():
+    plate = [[-0.5, -0.5, 1.0], [-0.5, 0.5, 1.0], [0.5, 0.5, 1.0], [0.5, -0.5, 1.0]]  # faces down
+    light = dict(kind="point", name="P", position=(0, 0, 2.0), power=200.0)
+    scene = _floor(lights=[light], extra=[plate])
+    result = bake(scene, BakeSettings())
+    pts, colours, face = _output(result)
+    on_floor = face == 0
+    x, y = pts[:, 0], pts[:, 1]
+    umbra = on_floor & (np.maximum(np.abs(x), np.abs(y)) < 0.9)
+    open_ = on_floor & (np.maximum(np.abs(x), np.abs(y)) > 1.1)
+    assert umbra.sum() >= 4 and open_.sum() >= 4
+    np.testing.assert_array_equal(colours[umbra], 0.0)
+    want = RHO * _point_closed_form(scene.lights, pts[open_]) / np.pi
+    np.testing.assert_allclose(colours[open_, 0], want, rtol=DIRECT_RTOL)
+    assert result.report["energy"]["emitted"] > 0
+
+
+def test_penumbra_of_a_straight_edge_under_a_disk_light():
+    """A black half-plane (x < 0) at height 1 under a disk light of radius r at height 2: a floor
+    point at x sees the part of the light beyond x (1 - H / h) = -x, a disk cut by a line."""
+    r, H, h = 0.2, 2.0, 1.0
+    big = [[-3.0, -3.0, h], [-3.0, 3.0, h], [0.0, 3.0, h], [0.0, -3.0, h]]       # faces down
+    light = dict(kind="point", name="Disk", position=(0, 0, H), power=100.0, radius=r)
+    scene = _floor(lights=[light], extra=[big])
+    lights = scene.lights
+    direct = DirectLight(lights, make_patches(scene, 0.5), samples=64)
+    x = np.linspace(-0.25, 0.25, 201)
+    pts = np.stack([x, np.linspace(-0.3, 0.3, 201), np.zeros_like(x)], axis=1)
+    got = direct.incident(pts, np.tile([0, 0, 1.0], (len(x), 1)))[:, 0]
+    bare = _point_closed_form(lights, pts) / np.pi
+    t = np.clip(-x * (H / h - 1) / r, -1, 1)
+    frac = (np.arccos(t) - t * np.sqrt(1 - t * t)) / np.pi
+    err = (got - bare * frac) / bare
+    assert np.abs(err).mean() < PENUMBRA_MEAN
+    assert np.abs(err).max() < PENUMBRA_MAX
+    assert np.all(got[x < -r * h / (H - h) - 0.01] == 0)
+    outside = np.count_nonzero(np.abs(x) > r * h / (H - h) + 0.01)
+    assert direct.rays <= len(x) * 9 + (len(x) - outside) * 64   # outside: 8 rays + the centre
+
+
+def _closed_box(sx, sy, sz, lights, rho=RHO):
+    V = np.array([[x, y, z] for z in (0, sz) for y in (0, sy) for x in (0, sx)], float)
+    F = [f[::-1] for f in [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2],
+                           [1, 3, 7, 5]]]                                          # inward
+    return scene_from_polygons(V, F, [0] * 6, [[rho] * 3], [[0, 0, 0]], lights=lights)
+
+
+@pytest.mark.parametrize("solver", ["auto", "progressive"])
+def test_closed_box_energy(solver):
+    light = dict(kind="point", name="P", position=(1.3, 1.1, 1.7), power=100.0)
+    scene = _closed_box(4.0, 3.0, 2.5, [light])
+    result = bake(scene, BakeSettings(solver=solver))
+    P = result.patches.areas.size
+    exitance = np.pi * (result.node_radiance[:P] * result.patches.areas[:, None]).sum(axis=0)
+    np.testing.assert_allclose(exitance, RHO / (1 - RHO) * 100.0, rtol=ENERGY_RTOL)
+    energy = result.report["energy"]
+    assert energy["emitted"] == pytest.approx(300.0, rel=1e-6)     # all of 4 pi I lands
+    assert abs(energy["balance"]) < 1e-3 * energy["emitted"]
+
+
+def test_scaled_scene_bakes_the_same():
+    plate = [[-0.5, -0.5, 1.0], [-0.5, 0.5, 1.0], [0.5, 0.5, 1.0], [0.5, -0.5, 1.0]]
+    lights = [dict(SOFT, position=(0.2, 0.1, 2.0)), SUN]
+    a = _floor(lights=lights, extra=[plate], extra_rho=0.6)
+    k = 1000.0
+    b = scene_from_polygons(a.vertices * k, [[0, 1, 2, 3], [4, 5, 6, 7]], [0, 1],
+                            a.reflectance, a.emission, lights=a.lights.scaled(k))
+    s = BakeSettings(output_mode="vertices")
+    ra = bake(a, s)
+    rb = bake(b, BakeSettings(output_mode="vertices", patch_size=s.patch_size or 0.5 * k,
+                              min_element=s.min_element * k))
+    # float32 hemicube rows of the small indirect part: 1e-5
+    np.testing.assert_allclose(rb.corner_colours, ra.corner_colours, rtol=1e-5, atol=1e-9)
+
+
+def test_relight_keeps_the_lights():
+    scene = _closed_box(3.0, 3.0, 2.5, [dict(POINT, position=(1.5, 1.5, 2.0))])
+    result = bake(scene, BakeSettings())
+    again = relight(result)
+    np.testing.assert_allclose(again.corner_colours, result.corner_colours, rtol=1e-9)
+    brighter = relight(result, reflectance=np.full((1, 3), 0.7))
+    assert np.all(brighter.corner_colours.mean(axis=0) > result.corner_colours.mean(axis=0))
+
+
+def test_lights_only_scene_is_accepted_and_no_light_is_refused():
+    scene = _floor(lights=[POINT])
+    assert scene.lights.names == ("Bulb",)
+    with pytest.raises(SceneError, match="no emitter"):
+        _floor(lights=[dict(POINT, power=0.0)])
+
+
+@pytest.mark.parametrize("light, match", [
+    (dict(kind="lamp", name="L"), 'light "L": kind must be one of'),
+    (dict(kind="point", name="L", position=(0, 0)), "'position' must be 3"),
+    (dict(kind="point", name="L", position=(0, 0, 1), power=-1), "power must be >= 0"),
+    (dict(kind="spot", name="L", position=(0, 0, 1), power=1, direction=(0, 0, 0),
+          spot_size=1.0), "direction must be non-zero"),
+    (dict(kind="spot", name="L", position=(0, 0, 1), power=1, direction=(0, 0, -1),
+          spot_size=4.0), "spot_size must lie in"),
+    (dict(kind="sun", name="L", direction=(0, 0, -1), strength=1, angle=-0.1),
+     "angle must lie in"),
+])
+def test_bad_lights_are_named(light, match):
+    with pytest.raises(SceneError, match=match):
+        make_lights([light])
