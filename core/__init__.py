@@ -8,11 +8,13 @@ from .bake import BakeResult, bake, form_factor_matrix, relight
 from .errors import BakeCancelled, RadiosityError, SceneError, SettingsError
 from .lights import Lights, make_lights
 from .outmesh import OutputMesh
+from .photometry import Photometry, read_photometry
 from .scene import Scene, make_scene, scene_from_polygons
 from .settings import BakeSettings
 
 __all__ = [
     "BakeCancelled", "RadiosityError", "SceneError", "SettingsError",
-    "Lights", "make_lights", "OutputMesh", "Scene", "make_scene", "scene_from_polygons",
+    "Lights", "make_lights", "Photometry", "read_photometry",
+    "OutputMesh", "Scene", "make_scene", "scene_from_polygons",
     "BakeResult", "BakeSettings", "bake", "form_factor_matrix", "relight",
 ]

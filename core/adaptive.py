@@ -35,6 +35,7 @@ import numpy as np
 
 from .criteria import (SHADOW_SAMPLES, EmitterSamples, contact_edges, contact_points, dark_floor,
                        interpolation_errors, luminance, per_leaf_scores)
+from .duplicates import copy_duplicate_faces
 from .elements import bake_elements
 from .gather import NORMAL_DECIMALS, corner_groups, shade
 from .geometry import patch_extents
@@ -242,7 +243,7 @@ def _leaf_scene(scene, tree, conf, flipped=None):
                       face_objects=scene.face_objects[conf["face_parent"]],
                       object_names=scene.object_names, material_names=scene.material_names,
                       back_reflectance=scene.back_reflectance, back_emission=scene.back_emission,
-                      lights=scene.lights)
+                      lights=scene.lights, world=scene.world)
     if flipped is None or not flipped.any():
         return out
     turn = flipped[conf["face_parent"]]
@@ -378,7 +379,10 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
     power = np.asarray(incident)
     if elements is not None:                 # an element has light if its patch has
         power = np.concatenate([power[elements.parent], power[P + elements.parent]])
-    seen = _seen_subset(seen, seen_L, power)
+    if scene.world is None:         # with a world, unlit surfaces still hide the sky
+        seen = _seen_subset(seen, seen_L, power)
+    else:
+        seen = _Seen(seen, np.arange(seen.areas.size))
     seen_L = seen.radiance(seen_L)
     far_field = None
     if elements is not None:
@@ -412,6 +416,7 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         go = go[_spatial_order(groups.points[go])]
         inc = np.zeros((new.size, 3))
         dl = np.zeros((new.size, 3))
+        covered = np.ones(new.size)
         vis = np.zeros(new.size, dtype=np.int64)
         batches = []
         pos_in_new = np.searchsorted(new, go)
@@ -422,6 +427,7 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
                 if far_field is None else far_field.rows(groups.points[g], groups.normals[g], **kw)
             cols, vals = compact_rows(rows)
             inc[pos_in_new[s:s + GATHER_BATCH]] = vals.astype(np.float64) @ seen_L[cols]
+            covered[pos_in_new[s:s + GATHER_BATCH]] = rows.sum(axis=1)
             batches.append((pos_in_new[s:s + GATHER_BATCH], cols, vals))
             if gather_monitor is not None:
                 done = (s + g.size) / go.size        # level k fills [1 - 2^-k, 1 - 2^-(k+1)]
@@ -430,8 +436,8 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         if go.size:
             vis[pos_in_new] = emitters.visibility(groups.points[go], groups.normals[go])
             if direct is not None:
-                dl[pos_in_new], bits = direct.incident(groups.points[go], groups.normals[go],
-                                                       bits=True)
+                dl[pos_in_new], bits = direct.extra(groups.points[go], groups.normals[go],
+                                                    covered[pos_in_new], bits=True)
                 inc[pos_in_new] += dl[pos_in_new]
                 vis[pos_in_new] |= bits << SHADOW_SAMPLES
         added = cache.add(keys[new], inc, vis, dl)
@@ -470,6 +476,8 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
     entry = entry.reshape(-1)
     corner_entry = np.zeros(leaf_scene.n_corners, dtype=np.int64)
     corner_entry[ok] = entry[groups.group[ok]]
+    mesh, copied = copy_duplicate_faces(scene, mesh)   # stability (issue 11): duplicates' faces
+    corner_entry = corner_entry[copied]
     state = AdaptiveState(mesh=mesh, entry=corner_entry,
                           material=cache.keys[u_ids, 1].astype(np.int64),
                           rows=cache.rows_for(u_ids), lit=lit, elements=elements, seen=seen,
@@ -527,7 +535,9 @@ def per_object_report(scene, mesh):
     obj_of_face = scene.face_objects[mesh.face_parent]
     obj_of_corner = obj_of_face[mesh.face_of_corner()]
     for o, name in enumerate(scene.object_names):
-        n_in = int(np.count_nonzero((scene.face_objects == o) & scene.face_valid))
+        baked = scene.face_valid if scene.face_duplicate_of is None \
+            else scene.face_valid | (scene.face_duplicate_of >= 0)
+        n_in = int(np.count_nonzero((scene.face_objects == o) & baked))
         if n_in == 0:
             continue
         verts = np.unique(mesh.corner_verts[obj_of_corner == o])

@@ -28,7 +28,8 @@ from .lights import DirectLight
 from .duplicates import duplicate_warning, fill_duplicate_colours, merge_duplicates
 from .orient import orient
 from .patches import make_patches, subdivide_patches
-from .pipeline import check_result, colours, form_factors, make_gather, node_arrays, solve
+from .pipeline import (check_result, colours, form_factors, make_gather, node_arrays, solve,
+                       with_world)
 from .progress import Monitor
 from .reciprocity import make_reciprocal
 from .refine import refine_mask
@@ -243,7 +244,8 @@ def relight(result, *, reflectance=None, emission=None, progress=None, cancel=No
         arr.setflags(write=False)
         changes[name] = arr
     new_scene = dataclasses.replace(scene, **changes)
-    if not np.any(new_scene.emission[state.patches.material] > 0) and scene.lights is None:
+    if not np.any(new_scene.emission[state.patches.material] > 0) and scene.lights is None \
+            and scene.world is None:
         raise ValueError("emission leaves no emitting patch: nothing to light the scene")
     monitor = Monitor(progress, cancel)
     t_start = time.perf_counter()
@@ -271,8 +273,8 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     timings = dict(timings)
     t0 = time.perf_counter()
     direct = kept.direct if kept is not None else None
-    if direct is None and scene.lights is not None:
-        direct = DirectLight(scene.lights, patches, settings.light_samples)
+    if direct is None and (scene.lights is not None or scene.world is not None):
+        direct = DirectLight(scene.lights, patches, settings.light_samples, scene.world)
     nodes = node_arrays(scene, patches, settings.two_sided, direct)
     if direct is not None:
         timings["lights"] = time.perf_counter() - t0
@@ -281,16 +283,19 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     monitor.update(0.0, "form factors")
     t0 = time.perf_counter()
     skip_late = None
-    if settings.output_mode == "mesh":          # unlit surfaces cost nothing (core.criteria)
+    if settings.output_mode == "mesh" and scene.world is None:  # unlit surfaces cost nothing
         def skip_late(active, late):
             return unlit_late_nodes(scene, patches, active, late, settings.resolution)
+    world = scene.world is not None
     if kept is None:
-        ff = form_factors(patches, nodes, settings, monitor, skip_late=skip_late)
+        ff = form_factors(patches, nodes, settings, monitor, skip_late=skip_late, all_nodes=world)
     else:
         ff = form_factors(patches, nodes, settings, monitor, kept.store, kept.active,
-                          skip_late=skip_late)
+                          skip_late=skip_late, all_nodes=world)
     monitor.update(1.0, "form factors done")
     timings["form_factors"] = time.perf_counter() - t0
+    lit_nodes = nodes
+    nodes = with_world(nodes, ff.store.row_sums, scene.world)
 
     monitor.stage(*_STAGES["solve"])
     monitor.update(0.0, "solving")
@@ -303,7 +308,13 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     monitor.update(0.0, "colours")
     t0 = time.perf_counter()
     # stability (issue 11): each face is baked on the side that receives the light (core.orient).
-    side = orient(scene, patches, sol.incident, settings.two_sided,
+    # The world lights every side open to it alike: which side faces the room is decided by the
+    # rest of the light.
+    oriented = sol
+    if nodes is not lit_nodes:
+        sky = nodes.direct - (lit_nodes.direct if lit_nodes.direct is not None else 0.0)
+        oriented = dataclasses.replace(sol, incident=sol.incident - sky * nodes.areas[:, None])
+    side = orient(scene, patches, oriented.incident, settings.two_sided,
                   kept.flipped if kept is not None else None, ff.store.row_sums)
     room_side = side.room_side(sol.node_radiance)
     gather = kept.gather if kept is not None else None
@@ -330,7 +341,7 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     monitor.update(1.0, "done")
     timings["total"] = time.perf_counter() - t_start
 
-    checks, energy, n_dropped = check_result(scene, patches, sol)
+    checks, energy, n_dropped = check_result(scene, patches, oriented, side.open_back)
     if side.flipped.any():   # stability (issue 11): the flipped faces are baked on the lit side
         checks = [w for w in checks if not w.endswith("on their back side: check normals")]
     checks += [w for w in [duplicate_warning(scene), side.warning()] if w]
@@ -358,7 +369,7 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     else:
         report["face_variation"] = face_variation(scene, patches, patch_radiance,
                                                   settings.contrast)
-    if direct is not None:
+    if direct is not None and len(direct):
         report["lights"] = dict(count=len(direct), names=list(scene.lights.names),
                                 shadow_rays=int(direct.rays))
     state = _State(scene, settings, patches, sol.store, ff.active, gather, on_contact,

@@ -138,3 +138,65 @@ def duplicate_warning(scene):
     return (f"{dups.size} faces coincide with other faces (duplicates, e.g. "
             f"{scene.face_label(dups[0])} = {scene.face_label(dup_of[dups[0]])}) in objects "
             f"{', '.join(names)}{more}: each group was solved as one surface")
+
+
+def copy_duplicate_faces(scene, mesh):
+    """The radiosity mesh with every duplicate face given a copy of its kept face's output faces.
+
+    A duplicate makes no patches, so the output has no faces of its own for it; the object it
+    belongs to (often a copy of the floor as an object of its own) would lose them. The copies
+    lie where the kept face's output faces lie, wound the duplicate's way (reversed for a
+    flipped duplicate), carry the same colours, and take their per-corner values from the
+    duplicate's own corners at the same places.
+
+    Returns
+    -------
+    mesh : core.outmesh.OutputMesh
+    source : (C_new,) int64
+        Output corner of ``mesh`` (as given) each corner of the result copies (itself for the
+        corners that were there).
+    """
+    C = mesh.corner_verts.size
+    source = np.arange(C)
+    dup_of = scene.face_duplicate_of
+    if dup_of is None or not np.any(dup_of >= 0):
+        return mesh, source
+    face_of = mesh.face_of_corner()
+    parts = dict(corner_verts=[mesh.corner_verts], face_sizes=[mesh.face_sizes],
+                 face_parent=[mesh.face_parent], corner_colours=[mesh.corner_colours],
+                 corner_sources=[mesh.corner_sources], corner_weights=[mesh.corner_weights],
+                 source=[source])
+    for d in np.flatnonzero(dup_of >= 0):             # a few faces: one loop per duplicate
+        k = dup_of[d]
+        faces = mesh.faces_of(np.array([k]))
+        if faces.size == 0:
+            continue
+        corners = np.flatnonzero(np.isin(face_of, faces))         # in face order
+        sizes = mesh.face_sizes[faces]
+        if scene.face_normals[d] @ scene.face_normals[k] < 0:     # flipped: reverse each face
+            first = np.repeat(mesh.face_starts[faces], sizes)
+            local = corners - first
+            corners = first + np.repeat(sizes, sizes) - 1 - local
+        # each of k's corners -> the duplicate's corner at the nearest place
+        ks = scene.face_starts[k] + np.arange(scene.face_sizes[k])
+        ds = scene.face_starts[d] + np.arange(scene.face_sizes[d])
+        pk = scene.vertices[scene.corner_verts[ks]]
+        pd = scene.vertices[scene.corner_verts[ds]]
+        nearest = ds[np.argmin(np.linalg.norm(pk[:, None] - pd[None], axis=2), axis=1)]
+        to_dup = dict(zip(ks.tolist(), nearest.tolist()))
+        src = mesh.corner_sources[corners]
+        parts["corner_verts"].append(mesh.corner_verts[corners])
+        parts["face_sizes"].append(sizes)
+        parts["face_parent"].append(np.full(faces.size, d, dtype=np.int64))
+        parts["corner_colours"].append(mesh.corner_colours[corners])
+        parts["corner_sources"].append(np.vectorize(to_dup.get, otypes=[np.int64])(src))
+        parts["corner_weights"].append(mesh.corner_weights[corners])
+        parts["source"].append(corners)
+    sizes = np.concatenate(parts["face_sizes"])
+    out = dataclasses.replace(
+        mesh, corner_verts=np.concatenate(parts["corner_verts"]), face_sizes=sizes,
+        face_starts=np.cumsum(sizes) - sizes, face_parent=np.concatenate(parts["face_parent"]),
+        corner_colours=np.concatenate(parts["corner_colours"]),
+        corner_sources=np.concatenate(parts["corner_sources"]),
+        corner_weights=np.concatenate(parts["corner_weights"]))
+    return out, np.concatenate(parts["source"])

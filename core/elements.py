@@ -147,7 +147,7 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
                               resolution=resolution, rotate=rotate, rng=rng)
             cols, vals = compact_rows(rows)
             dl = np.zeros((ids.size, 3)) if direct is None else \
-                direct.incident(elements.centres[ids], elements.normals[ids])
+                direct.extra(elements.centres[ids], elements.normals[ids], rows.sum(axis=1))
             kept.append((ids, cols, vals, dl))
             front[ids] = shade(scene, elements.material[ids],
                                vals.astype(np.float64) @ L[cols] + dl)

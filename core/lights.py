@@ -17,6 +17,20 @@ Units (measured against Cycles bakes with bpy 5.0.1, ``tests/addon/test_lights.p
   the blend, 0 outside the cone, with no cosine falloff across the cone (a is the angle from the
   spot's axis);
 * sun: ``E = strength x colour x cos(theta)`` (strength in W/m^2).
+* measured distribution (``photometry``, an IES or EULUMDAT file, :mod:`core.photometry`) on a
+  point or spot light: ``I(dir) = power x colour / (4 pi) x f(dir)``, the cone (spot) and soft
+  falloff as without. ``photometry_scale`` says what the light's power means:
+
+  - ``'power'`` (default): the file gives the *shape*, the power the total:
+    ``f = candela(dir) / mean candela over the sphere``, so the light emits its power, as the
+    isotropic light of the same power does (before a spot's cone);
+  - ``'cycles'``: what Cycles gives a light whose node tree feeds an IES Texture node (strength
+    1) into its Emission strength: ``f = candela(dir) x 4 pi / 177.83``, so a 1 W light emits the
+    file's absolute candela (at 177.83 lm/W, Cycles' D65 efficacy) and the power multiplies it.
+
+  Orientation as Cycles' IES Texture node reads it on a light: the light's local -Z (``direction``)
+  is the nadir, gamma 0; local -Y (``c0``) is C = 0 and local -X is C = 90 degrees
+  (``c90 = direction x c0``).
 
 Soft shadows: the visible fraction of the light, sampled over a disk of the light's radius facing
 the receiver (point, spot) or over the cone of the sun's angular diameter: ``samples`` shadow rays
@@ -32,6 +46,7 @@ import numpy as np
 
 from .errors import SceneError
 from .exact import ray_triangles
+from .photometry import CYCLES_CANDELA_TO_WATT, Photometry
 from .raycast import any_hit, build_bvh
 
 KINDS = ("point", "spot", "sun")
@@ -87,6 +102,9 @@ class Lights:
         W/m^2 on a surface facing the sun, RGB.
     sun_half_angle : (m,) float64
         Half the sun's angular diameter (rad).
+    profiles : tuple
+        Per point and spot light, its :class:`LightProfile` (a measured distribution) or None;
+        empty when no light has one.
     """
 
     names: tuple
@@ -101,6 +119,7 @@ class Lights:
     sun_direction: np.ndarray
     sun_irradiance: np.ndarray
     sun_half_angle: np.ndarray
+    profiles: tuple = ()
 
     @property
     def n_points(self):
@@ -118,7 +137,8 @@ class Lights:
         irradiance at the scaled distances is unchanged)."""
         return Lights(self.names, self.position * factor, self.intensity * factor ** 2,
                       self.radius * factor, self.soft, self.axis, self.cos_half, self.smooth,
-                      self.shadow, self.sun_direction, self.sun_irradiance, self.sun_half_angle)
+                      self.shadow, self.sun_direction, self.sun_irradiance, self.sun_half_angle,
+                      self.profiles)
 
     def power(self):
         """(3,) total power (W) of the point and spot lights as if isotropic (4 pi I)."""
@@ -138,6 +158,77 @@ def _vec(light, key, label, default=None, length=3):
     return arr if length > 1 else float(arr[0])
 
 
+def _direction(light, label, key="direction", default=None):
+    d = _vec(light, key, label, default)
+    n = np.linalg.norm(d)
+    if n == 0:
+        raise SceneError(f"{label}: {key} must be non-zero")
+    return d / n
+
+
+#: What a light's power means with a measured distribution (core.photometry): see the module
+#: docstring.
+PHOTOMETRY_SCALES = ("power", "cycles")
+
+
+@dataclass(frozen=True, eq=False)
+class LightProfile:
+    """A measured distribution placed on a light: ``f(dir) = gain x candela(gamma, C)``.
+
+    Attributes
+    ----------
+    photometry : core.photometry.Photometry
+    nadir, c0, c90 : (3,) float64
+        Unit vectors: gamma 0, and C = 0 and C = 90 degrees at gamma 90 (``c90 = nadir x c0``).
+    gain : float
+        Per candela: 1 / mean candela ('power') or 4 pi / 177.83 ('cycles').
+    """
+
+    photometry: Photometry
+    nadir: np.ndarray
+    c0: np.ndarray
+    c90: np.ndarray
+    gain: float
+
+    def factor(self, directions):
+        """(n,) ``f`` along unit ``directions`` (n, 3) leaving the light (vectorised)."""
+        d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+        gamma = np.arccos(np.clip(d @ self.nadir, -1.0, 1.0))
+        c = np.arctan2(d @ self.c90, d @ self.c0)
+        return self.gain * self.photometry.intensity(gamma, c)
+
+
+def _profile(light, label):
+    """The :class:`LightProfile` of a point or spot light dict, or None."""
+    phot = light.get("photometry")
+    if phot is None:
+        return None
+    if not isinstance(phot, Photometry):
+        raise SceneError(f"{label}: photometry must be a core.photometry.Photometry (read_ies, "
+                         f"read_ldt); got {type(phot).__name__}")
+    scale = light.get("photometry_scale", "power")
+    if scale not in PHOTOMETRY_SCALES:
+        raise SceneError(f"{label}: photometry_scale must be one of {PHOTOMETRY_SCALES}; got "
+                         f"{scale!r}")
+    nadir = _direction(light, label, default=(0.0, 0.0, -1.0))
+    c0 = _direction(light, label, "c0", (0.0, -1.0, 0.0))
+    c0 = c0 - (c0 @ nadir) * nadir
+    n = np.linalg.norm(c0)
+    if n < 1e-6:
+        raise SceneError(f"{label}: c0 (C = 0 of the photometry; default (0, -1, 0)) must not be "
+                         f"parallel to direction; got {light.get('c0', (0.0, -1.0, 0.0))!r}")
+    c0 = c0 / n
+    if scale == "power":
+        flux = phot.flux()
+        if not flux > 0:
+            raise SceneError(f"{label}: the photometry of {phot.name} emits no light (flux "
+                             f"{flux:g} lm)")
+        gain = 4.0 * np.pi / flux
+    else:
+        gain = CYCLES_CANDELA_TO_WATT
+    return LightProfile(phot, nadir, c0, np.cross(nadir, c0), float(gain))
+
+
 def make_lights(lights):
     """Validate lights given in Blender's terms and convert them to :class:`Lights`.
 
@@ -153,7 +244,12 @@ def make_lights(lights):
           (0, pi]) and ``spot_blend`` (in [0, 1]);
         * sun: ``direction`` (the way the light travels, Blender's -Z of the sun object),
           ``strength`` (W/m^2) and ``angle`` (angular diameter, rad, default 0);
-        * any: ``shadow`` (casts shadows, default True).
+        * any: ``shadow`` (casts shadows, default True);
+        * point, spot, optional: ``photometry`` (a :class:`core.photometry.Photometry`),
+          ``photometry_scale`` (one of :data:`PHOTOMETRY_SCALES`, default 'power'),
+          ``direction`` (the nadir, the light's -Z; a spot's own direction; default
+          (0, 0, -1)) and ``c0`` (C = 0, the light's -Y; default (0, -1, 0); made perpendicular
+          to ``direction``): see the module docstring.
 
     Returns
     -------
@@ -178,17 +274,16 @@ def make_lights(lights):
             raise SceneError(f"{label}: color must be >= 0; got {color.tolist()}")
         shadow = bool(light.get("shadow", True))
         if kind == "sun":
-            d = _vec(light, "direction", label)
-            n = np.linalg.norm(d)
-            if n == 0:
-                raise SceneError(f"{label}: direction must be non-zero")
+            if light.get("photometry") is not None:
+                raise SceneError(f"{label}: photometry is for point and spot lights; got a sun")
+            direction = _direction(light, label)
             strength = _vec(light, "strength", label, length=1)
             angle = _vec(light, "angle", label, 0.0, length=1)
             if strength < 0:
                 raise SceneError(f"{label}: strength must be >= 0 W/m^2; got {strength}")
             if not 0 <= angle < np.pi:
                 raise SceneError(f"{label}: angle must lie in [0, pi) rad; got {angle}")
-            suns.append((name, -d / n, strength * color, angle / 2, shadow))
+            suns.append((name, -direction, strength * color, angle / 2, shadow))
             continue
         pos = _vec(light, "position", label)
         power = _vec(light, "power", label, length=1)
@@ -199,20 +294,18 @@ def make_lights(lights):
             raise SceneError(f"{label}: radius must be >= 0 m; got {radius}")
         axis, cos_half, smooth = np.zeros(3), -1.0, 0.0
         if kind == "spot":
-            d = _vec(light, "direction", label)
-            n = np.linalg.norm(d)
-            if n == 0:
-                raise SceneError(f"{label}: direction must be non-zero")
+            axis = _direction(light, label)
             size = _vec(light, "spot_size", label, length=1)
             blend = _vec(light, "spot_blend", label, 0.0, length=1)
             if not 0 < size <= np.pi:
                 raise SceneError(f"{label}: spot_size must lie in (0, pi] rad; got {size}")
             if not 0 <= blend <= 1:
                 raise SceneError(f"{label}: spot_blend must lie in [0, 1]; got {blend}")
-            axis, cos_half = d / n, float(np.cos(size / 2))
+            cos_half = float(np.cos(size / 2))
             smooth = (1.0 - cos_half) * blend
         points.append((name, pos, power * color / (4 * np.pi), radius,
-                       bool(light.get("soft_falloff", True)), axis, cos_half, smooth, shadow))
+                       bool(light.get("soft_falloff", True)), axis, cos_half, smooth, shadow,
+                       _profile(light, label)))
 
     def col(rows, k, shape):
         return np.array([r[k] for r in rows], dtype=np.float64).reshape(shape)
@@ -225,7 +318,8 @@ def make_lights(lights):
         axis=col(points, 5, (n, 3)), cos_half=col(points, 6, (n,)), smooth=col(points, 7, (n,)),
         shadow=np.array([p[8] for p in points] + [s[4] for s in suns], dtype=bool),
         sun_direction=col(suns, 1, (m, 3)), sun_irradiance=col(suns, 2, (m, 3)),
-        sun_half_angle=col(suns, 3, (m,)))
+        sun_half_angle=col(suns, 3, (m,)),
+        profiles=tuple(p[9] for p in points) if any(p[9] is not None for p in points) else ())
 
 
 def spot_factor(cos_angle, cos_half, smooth):
@@ -265,15 +359,19 @@ class DirectLight:
 
     Parameters
     ----------
-    lights : Lights
+    lights : Lights or None
     patches : core.patches.Patches
         What casts shadows (every patch; emitters included).
     samples : int
         Shadow rays per light and point where the light has a size (radius or angle).
+    world : (3,) float or None
+        Radiance of a uniform world: :meth:`extra` adds it for the part of a receiver's
+        hemisphere that no surface covers.
     """
 
-    def __init__(self, lights, patches, samples=16):
-        self.lights = lights
+    def __init__(self, lights, patches, samples=16, world=None):
+        self.lights = lights if lights is not None else make_lights([])
+        self.world = None if world is None else np.asarray(world, dtype=np.float64)
         self.samples = int(samples)
         tris = ray_triangles(patches)[0]
         self.bvh = build_bvh(tris)
@@ -300,14 +398,25 @@ class DirectLight:
         out /= np.pi
         return (out, vis_bits) if bits else out
 
+    def extra(self, points, normals, row_sums, *, bits=False):
+        """What a gather point receives besides its hemicube's surfaces (irradiance / pi):
+        the lights' direct light, and the world in the part of the hemicube no surface covers,
+        ``world x (1 - row sum)``. ``bits`` as in :meth:`incident`."""
+        inc, vis = self.incident(points, normals, bits=True)
+        if self.world is not None:
+            sky = np.clip(1.0 - np.asarray(row_sums, dtype=np.float64), 0.0, 1.0)
+            inc = inc + sky[:, None] * self.world[None, :]
+        return (inc, vis) if bits else inc
+
     def _colour(self, j):
         lt = self.lights
         return lt.intensity[j] if j < lt.n_points else lt.sun_irradiance[j - lt.n_points]
 
     def _per_light(self, points, normals, samples):
         """Per light j: (j, bare, scale, centre), each (n,): ``bare`` the point light's
-        cos / d^2 (a sun's cos) before shadows, cone and soft falloff, ``scale`` the factor of
-        the light's colour in the irradiance, ``centre`` the light's centre lights the point."""
+        cos / d^2 (a sun's cos) before shadows, cone, photometry and soft falloff, ``scale`` the
+        factor of the light's colour in the irradiance, ``centre`` the light's centre lights the
+        point."""
         normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
         k = self.samples if samples is None else int(samples)
         lt = self.lights
@@ -329,6 +438,8 @@ class DirectLight:
                 scale = np.where(cos_r > 0, cos_r / np.maximum(fall, 1e-300), 0.0)
                 if lt.cos_half[j] > -1.0:
                     scale *= spot_factor(-(ldir @ lt.axis[j]), lt.cos_half[j], lt.smooth[j])
+                if lt.profiles and lt.profiles[j] is not None:
+                    scale *= lt.profiles[j].factor(-ldir)
                 size = r
             else:
                 s = j - lt.n_points

@@ -37,8 +37,9 @@ OPEN_SIDE = 0.5
 MAX_NAMED = 5
 
 
-def flipped_faces(scene, patches, incident, row_sums=None):
-    """(F,) bool: faces whose room side is their back.
+def flipped_faces(scene, patches, incident, row_sums=None, keep_open=False, detail=False):
+    """(F,) bool: faces whose room side is their back (``detail``: and (F,) bool, the faces
+    whose back is open to the outside and their front closed in: lit from behind by design).
 
     Parameters
     ----------
@@ -50,6 +51,10 @@ def flipped_faces(scene, patches, incident, row_sums=None):
     row_sums : (2P,) float, optional
         Form-factor row sum of every node (NaN where not computed). Without it emitters are
         never flipped.
+    keep_open : bool
+        A face open to the outside on both sides keeps the side its normal points to (with a
+        world, both sides of a free-standing wall or a ground plane are lit, and Cycles bakes
+        the normal's side).
     """
     P = len(patches.areas)
     power = np.asarray(incident, dtype=np.float64).sum(axis=1)
@@ -63,6 +68,7 @@ def flipped_faces(scene, patches, incident, row_sums=None):
     emits = np.zeros(F, dtype=bool)
     emits[patches.face[np.any(np.asarray(scene.emission)[patches.material] > 0, axis=1)]] = True
     flipped &= ~emits
+    open_back = np.zeros(F, dtype=bool)
     if row_sums is not None:
         s = np.asarray(row_sums, dtype=np.float64)
         known = np.isfinite(s[:P]) & np.isfinite(s[P:])
@@ -78,7 +84,10 @@ def flipped_faces(scene, patches, incident, row_sums=None):
         # walls, or a lamp outside a window, must not turn the walls inside out.
         flipped = np.where(~emits & open_back, False, flipped)
         flipped = np.where(~emits & open_front & back_lit, True, flipped)
-    return flipped
+        if keep_open:
+            both_open = (fr < OPEN_SIDE * wsum) & (bk < OPEN_SIDE * wsum) & (wsum > 0)
+            flipped &= ~(both_open & ~emits)
+    return (flipped, open_back) if detail else flipped
 
 
 @dataclasses.dataclass(frozen=True)
@@ -93,12 +102,16 @@ class Orientation:
     patches : core.patches.Patches
         The patches with the flipped faces' patch normals reversed (for the patch average).
     patch_flipped : (P,) bool
+    open_back : (F,) bool or None
+        Faces whose back is open to the outside and front closed in (their back may be lit
+        more, by the sun on a room's outside: no sign of a flipped normal).
     """
 
     flipped: np.ndarray
     scene: object
     patches: object
     patch_flipped: np.ndarray
+    open_back: np.ndarray = None
 
     def room_side(self, node_radiance):
         """(P, 3): the radiance of every patch on its baked side."""
@@ -123,15 +136,19 @@ class Orientation:
 
 def orient(scene, patches, incident, two_sided, flipped=None, row_sums=None):
     """The :class:`Orientation` of a solved bake (``flipped`` given: reuse it, e.g. relight)."""
+    open_back = None
     if flipped is None:
-        flipped = (flipped_faces(scene, patches, incident, row_sums) if two_sided
-                   else np.zeros(scene.n_faces, dtype=bool))
+        if two_sided:
+            flipped, open_back = flipped_faces(scene, patches, incident, row_sums,
+                                               keep_open=scene.world is not None, detail=True)
+        else:
+            flipped = np.zeros(scene.n_faces, dtype=bool)
     flipped = np.asarray(flipped, dtype=bool)
     patch_flipped = flipped[patches.face]
     if not flipped.any():
-        return Orientation(flipped, scene, patches, patch_flipped)
+        return Orientation(flipped, scene, patches, patch_flipped, open_back)
     normals = np.where(flipped[:, None], -scene.face_normals, scene.face_normals)
     normals.setflags(write=False)
     p_normals = np.where(patch_flipped[:, None], -patches.normals, patches.normals)
     return Orientation(flipped, dataclasses.replace(scene, face_normals=normals),
-                       dataclasses.replace(patches, normals=p_normals), patch_flipped)
+                       dataclasses.replace(patches, normals=p_normals), patch_flipped, open_back)

@@ -28,7 +28,7 @@ import numpy as np
 from .colours import corner_colours
 from .elements import bake_elements
 from .gather import corner_groups, gather_rows, gathered_colours
-from .orient import BACKLIGHT_RATIO
+from .orient import BACKLIGHT_RATIO, MIN_LIT
 from .progress import SubMonitor
 from .reciprocity import asymmetry, make_reciprocal
 from .rows import Batcher, RowStore, discover, row_function, row_seconds
@@ -90,6 +90,20 @@ class Nodes:
         return np.flatnonzero(np.any(self.source > 0, axis=1) & self.allowed)
 
 
+def with_world(nodes, row_sums, world):
+    """``nodes`` with a uniform world's light added to ``direct``: ``world x (1 - row sum)``
+    for every node with a row (the part of its hemicube that no surface covers)."""
+    if world is None:
+        return nodes
+    s = np.asarray(row_sums, dtype=np.float64)
+    sky = np.where(np.isfinite(s), np.clip(1.0 - s, 0.0, 1.0), 0.0)
+    sky = np.where(nodes.allowed, sky, 0.0)
+    direct = sky[:, None] * np.asarray(world, dtype=np.float64)[None, :]
+    if nodes.direct is not None:
+        direct = direct + nodes.direct
+    return dataclasses.replace(nodes, direct=direct)
+
+
 def node_arrays(scene, patches, two_sided, direct=None):
     """Per-node reflectance, emission, areas and the nodes allowed to be active (:class:`Nodes`).
 
@@ -109,7 +123,9 @@ def node_arrays(scene, patches, two_sided, direct=None):
     allowed = np.ones(2 * P, dtype=bool)
     if not two_sided:
         allowed[P:] = False
-    direct_n = direct.patch_incident(patches, two_sided) if direct is not None else None
+    direct_n = None
+    if direct is not None and len(direct):
+        direct_n = direct.patch_incident(patches, two_sided)
     return Nodes(rho_n, le_n, areas, allowed, direct_n)
 
 
@@ -137,11 +153,13 @@ class FormFactors:
     batch: int
 
 
-def form_factors(patches, nodes, settings, monitor, store=None, active=None, *, skip_late=None):
+def form_factors(patches, nodes, settings, monitor, store=None, active=None, *, skip_late=None,
+                 all_nodes=False):
     """Discovery from the emitters (only from new ones when ``store`` holds a bake's rows).
 
     ``skip_late(active, late) -> (len(late),) bool``: front nodes that get no late row (the
     radiosity mesh skips unlit surfaces: :func:`core.criteria.unlit_late_nodes`).
+    ``all_nodes``: back nodes get late rows too (a world lights every side open to it).
     """
     P = len(patches.areas)
     N = 2 * P
@@ -169,6 +187,8 @@ def form_factors(patches, nodes, settings, monitor, store=None, active=None, *, 
     late = np.flatnonzero(~active[:P])
     if skip_late is not None and len(late):
         late = late[~skip_late(active, late)]
+    if all_nodes:
+        late = np.concatenate([late, P + np.flatnonzero(~active[P:] & nodes.allowed[P:])])
     if len(late) and not overflow:
         active, overflow = discover(store, rows_fn, nodes.allowed, active, late, monitor,
                                     settings.memory_budget, batcher, expand=False)
@@ -366,7 +386,7 @@ def make_gather(scene, patches, node_radiance, settings, monitor, on_contact=Non
                        rng=np.random.default_rng([settings.seed, 2]), monitor=sub)
     at_points = None
     if direct is not None:
-        at_points = direct.incident(groups.points, groups.normals)
+        at_points = direct.extra(groups.points, groups.normals, rows.row_sums)
     return Gather(groups, rows, elements, at_points)
 
 
@@ -396,13 +416,13 @@ def colours(scene, patches, node_radiance, settings, gather):
                             gather.direct), element_report
 
 
-def check_result(scene, patches, sol):
+def check_result(scene, patches, sol, open_back=None):
     """Warnings about the scene and the energy balance, and the balance in watts (dict)."""
     warnings = []
     n_dropped = scene.faces_dropped           # degenerate only (duplicates: core.duplicates)
     if n_dropped:
         warnings.append(f"{n_dropped} degenerate faces (zero area) were dropped")
-    n_back = faces_lit_from_behind(patches, sol.incident, scene.emission)
+    n_back = faces_lit_from_behind(patches, sol.incident, scene.emission, open_back)
     if n_back:
         warnings.append(f"{n_back} faces receive more light on their back side: check normals")
     emitted, absorbed, escaped = (float(np.pi * x.sum()) for x in sol.energy_rgb)
@@ -415,13 +435,21 @@ def check_result(scene, patches, sol):
     return warnings, energy, n_dropped
 
 
-def faces_lit_from_behind(patches, incident, emission):
-    """Number of non-emitting faces whose back nodes receive more power than their front nodes."""
+def faces_lit_from_behind(patches, incident, emission, open_back=None):
+    """Number of non-emitting faces whose back nodes receive more power than their front nodes,
+    and more than ``MIN_LIT`` x the scene's mean irradiance (a leak into a closed box is no sign
+    of a flipped normal), not counting ``open_back`` faces ((F,) bool: lit from the outside by
+    design)."""
     P = len(patches.areas)
     power = incident.sum(axis=1)
     n_faces = len(patches.face_patch_start) - 1
     front = np.bincount(patches.face, weights=power[:P], minlength=n_faces)
     back = np.bincount(patches.face, weights=power[P:], minlength=n_faces)
+    area = np.bincount(patches.face, weights=patches.areas, minlength=n_faces)
+    mean_irradiance = power.sum() / max(2.0 * float(area.sum()), np.finfo(float).tiny)
     emits = np.zeros(n_faces, dtype=bool)
     emits[patches.face[np.any(np.asarray(emission)[patches.material] > 0, axis=1)]] = True
-    return int(np.count_nonzero((back > BACKLIGHT_RATIO * front) & (back > 0) & ~emits))
+    if open_back is not None:
+        emits |= open_back
+    lit = (back > 0) & (back > MIN_LIT * mean_irradiance * area)
+    return int(np.count_nonzero((back > BACKLIGHT_RATIO * front) & lit & ~emits))

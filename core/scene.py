@@ -50,6 +50,9 @@ class Scene:
         (marked invalid) stands for, -1 for other faces. None: not checked.
     lights : core.lights.Lights or None
         Point, spot and sun lights (:func:`core.lights.make_lights`); None: none.
+    world : (3,) float64 or None
+        Radiance of a uniform world (Blender's world colour x strength) seen in every direction
+        no surface covers; None: black.
     """
 
     vertices: np.ndarray
@@ -69,6 +72,7 @@ class Scene:
     back_emission: np.ndarray = None
     face_duplicate_of: np.ndarray = None
     lights: Lights = None
+    world: np.ndarray = None
 
     def back_materials(self):
         """(reflectance, emission) of the back sides, (M, 3) each."""
@@ -154,7 +158,7 @@ def _first_bad_row(mask):
 
 def make_scene(vertices, corner_verts, face_starts, face_sizes, face_materials, reflectance,
                emission, *, face_objects=None, object_names=None, material_names=None,
-               back_reflectance=None, back_emission=None, lights=None):
+               back_reflectance=None, back_emission=None, lights=None, world=None):
     """Validate scene arrays and derive per-face normals and areas.
 
     Parameters
@@ -179,6 +183,8 @@ def make_scene(vertices, corner_verts, face_starts, face_sizes, face_materials, 
         Material of the back sides (default: the same as the front). Same rules as the front.
     lights : core.lights.Lights or sequence of dict, optional
         Point, spot and sun lights (dicts go through :func:`core.lights.make_lights`).
+    world : (3,) float, optional
+        Radiance of a uniform world, RGB, >= 0 (Blender: world colour x strength).
 
     Returns
     -------
@@ -299,17 +305,25 @@ def make_scene(vertices, corner_verts, face_starts, face_sizes, face_materials, 
         lights = make_lights(lights)
     if lights is not None and len(lights) == 0:
         lights = None
-    has_light = lights is not None and (np.any(lights.intensity > 0)
-                                        or np.any(lights.sun_irradiance > 0))
+    if world is not None:
+        world = np.array(world, dtype=np.float64).reshape(-1)
+        if world.shape != (3,) or not np.all(np.isfinite(world)) or np.any(world < 0):
+            raise SceneError(f"world must be 3 finite radiances >= 0 (RGB); got {world.tolist()}")
+        world.setflags(write=False)
+        if not np.any(world > 0):
+            world = None
+    has_light = (lights is not None and (np.any(lights.intensity > 0)
+                                         or np.any(lights.sun_irradiance > 0))) \
+        or world is not None
     if not (emitting_materials[face_materials] & valid).any() and not has_light:
         raise SceneError("the scene has no emitter: no valid face uses a material with emission > 0 "
-                         "(add an emissive material or a light)")
+                         "(add an emissive material, a light or a world colour)")
 
     for arr in (normals, areas, valid):
         arr.setflags(write=False)
     return Scene(vertices, corner_verts, face_starts, face_sizes, face_materials, reflectance,
                  emission, face_objects, object_names, material_names, normals, areas, valid,
-                 back_reflectance, back_emission, lights=lights)
+                 back_reflectance, back_emission, lights=lights, world=world)
 
 
 def _newell(vertices, corner_verts, face_starts, face_sizes):

@@ -13,7 +13,9 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
+from ..core.errors import SceneError
 from ..core.lights import make_lights
+from ..core.photometry import read_photometry
 from .materials import MaterialReader, area_light_polygon, area_light_radiance
 
 #: An area light is modelled as a one-sided emitting polygon: its front emits the converted
@@ -340,7 +342,7 @@ def _extract(depsgraph, selected_only):
     if out.instances:
         out.notes.append(f"{out.instances} instance(s) light and shadow the scene but receive no "
                          "colours (they share their source's mesh)")
-    world_note = _world_warning(scene)
+    world_radiance, world_note = read_world(scene)
     if world_note:
         out.warnings.append(world_note)
     out.warnings.extend(f"{kind} lights are not supported yet and were ignored: {_names(names)}"
@@ -369,6 +371,8 @@ def _extract(depsgraph, selected_only):
             # irradiance at Blender-unit distances (positions and radii in metres, intensity
             # times scale^2) -- measured, see tests/addon/test_lights.py.
             out.arrays["lights"] = make_lights(light_dicts).scaled(scale)
+        if world_radiance is not None:
+            out.arrays["world"] = world_radiance
     return out
 
 
@@ -435,7 +439,8 @@ def light_dict(inst, notes=None):
     In Blender units (``Lights.scaled`` converts to metres). The light's radius is not scaled
     by the object's scale, as in Cycles (measured). A light node tree is ignored and a spot's
     non-uniform scale is read as a round cone; both are added to *notes* (dict: approximation ->
-    light names).
+    light names). A point or spot light's ``radiosity_ies`` file (:func:`_photometry`) gives it
+    a measured distribution.
 
     Parameters
     ----------
@@ -467,6 +472,7 @@ def light_dict(inst, notes=None):
     out.update(position=matrix[:3, 3].copy(), radius=radius,
                power=power * _unnormalized(light, kind, radius),
                soft_falloff=bool(getattr(light, "use_soft_falloff", True)))
+    out.update(_photometry(obj, light, direction, matrix))
     if kind == "spot":
         out.update(direction=direction, spot_size=float(light.spot_size),
                    spot_blend=float(light.spot_blend))
@@ -475,6 +481,27 @@ def light_dict(inst, notes=None):
             notes.setdefault("Spot lights with non-uniform scale are not supported yet and were "
                              "baked with a round cone", []).append(obj.name)
     return out
+
+
+def _photometry(obj, light, direction, matrix):
+    """The light's measured distribution (its ``radiosity_ies`` file) as make_lights keys: {}
+    without one. The light's -Z is the nadir, its -Y the C0 plane, as Cycles' IES Texture node
+    reads a file on a light. An unreadable or malformed file stops the bake here, before any long
+    work, naming the light and the file."""
+    # The original datablock: the evaluated copy keeps a property's value from the last
+    # depsgraph evaluation.
+    original = getattr(light, "original", None) or light
+    path = getattr(original, "radiosity_ies", "")
+    if not path:
+        return {}
+    full = bpy.path.abspath(path, library=original.library)
+    try:
+        photometry = read_photometry(full)
+    except SceneError as exc:
+        raise SceneError(f'light "{obj.name}": its IES / LDT file {path!r} cannot be used: '
+                         f"{exc}") from None
+    return dict(photometry=photometry, photometry_scale=original.radiosity_ies_scale.lower(),
+                direction=direction, c0=-matrix[:3, 1])
 
 
 def _add_light(inst, unit, out, add_faces, object_names, rho, le, mat_keys, one_sided):
@@ -515,11 +542,17 @@ def _names(names, limit=5):
     return text + (f" and {len(uniq) - limit} more" if len(uniq) > limit else "")
 
 
-def _world_warning(scene):
+def read_world(scene):
+    """(radiance (3,) or None, warning or None) of the scene's world.
+
+    A uniform world (the world colour, or a Background node whose Color and Strength are not
+    linked) is baked: radiance = colour x strength, what Cycles' diffuse rays see where they
+    hit nothing. A textured world or another shader is not supported yet: a warning, and black.
+    """
     world = scene.world
     if world is None:
-        return None
-    colour, strength = np.array(world.color[:3]), 1.0
+        return None, None
+    colour, strength = np.array(world.color[:3], dtype=np.float64), 1.0
     tree = world.node_tree
     if bpy.app.version < (5, 0, 0) and not world.use_nodes:  # always on (deprecated) in 5
         tree = None
@@ -527,15 +560,20 @@ def _world_warning(scene):
         outs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld"]
         surface = outs[0].inputs.get("Surface") if outs else None
         if surface is None or not surface.is_linked:
-            return None
+            return None, None
         node = surface.links[0].from_node
         if node.bl_idname != "ShaderNodeBackground":
-            return (f"World '{world.name}' lighting ({node.name}) is not supported yet and was "
-                    "ignored")
+            return None, (f"World '{world.name}' lighting ({node.name}) is not supported yet "
+                          "and was ignored")
         c_in, s_in = node.inputs["Color"], node.inputs["Strength"]
         if c_in.is_linked or s_in.is_linked:
-            return f"World '{world.name}' lighting (textured) is not supported yet and was ignored"
-        colour, strength = np.array(c_in.default_value[:3]), float(s_in.default_value)
-    if strength * float(np.max(colour)) > 0:
-        return f"World '{world.name}' lighting is not supported yet and was ignored"
-    return None
+            return None, (f"World '{world.name}' lighting (textured) is not supported yet and "
+                          "was ignored")
+        colour = np.array(c_in.default_value[:3], dtype=np.float64)
+        strength = float(s_in.default_value)
+    radiance = np.maximum(colour * strength, 0.0)
+    if not np.any(radiance > 0):
+        return None, None
+    if world.cycles_visibility.diffuse is False:
+        return None, None
+    return radiance, None

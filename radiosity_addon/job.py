@@ -103,8 +103,9 @@ def prepare(context, options):
 
 
 def _has_light(arrays):
-    """Whether anything emits: an emissive face or a point, spot or sun light of power > 0."""
-    if (arrays["emission"][arrays["face_materials"]] > 0).any():
+    """Whether anything emits: an emissive face, a point, spot or sun light of power > 0, or a
+    world colour."""
+    if (arrays["emission"][arrays["face_materials"]] > 0).any() or arrays.get("world") is not None:
         return True
     lights = arrays.get("lights")
     return lights is not None and bool((lights.intensity > 0).any()

@@ -173,7 +173,32 @@ def summary_lines(text):
     return lines
 
 
-CLASSES = (VIEW3D_PT_radiosity, VIEW3D_PT_radiosity_last)
+class DATA_PT_radiosity_light(bpy.types.Panel):
+    """Properties > Light data: the light's measured distribution for the radiosity bake."""
+
+    bl_label = "Radiosity"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "data"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    @classmethod
+    def poll(cls, context):
+        light = getattr(context, "light", None)
+        return light is not None and light.type in {"POINT", "SPOT"}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        light = context.light
+        layout.prop(light, "radiosity_ies")
+        row = layout.row()
+        row.active = bool(light.radiosity_ies)
+        row.prop(light, "radiosity_ies_scale")
+
+
+CLASSES = (VIEW3D_PT_radiosity, VIEW3D_PT_radiosity_last, DATA_PT_radiosity_light)
 
 
 def register():

@@ -102,17 +102,43 @@ class RadiositySettings(bpy.types.PropertyGroup):
 
 CLASSES = (RadiositySettings,)
 
+#: Blender 5.0 warns on a "//" path in a file path property without this option; 4.2 lacks it.
+_RELATIVE = ({"PATH_SUPPORTS_BLEND_RELATIVE"}
+             if "is_path_supports_blend_relative" in bpy.types.Property.bl_rna.properties
+             else set())
+
+#: Per point and spot light (Light datablock): a measured distribution (core.photometry) and what
+#: the light's power means with it (core.lights.PHOTOMETRY_SCALES, upper case).
+LIGHT_PROPERTIES = dict(
+    radiosity_ies=StringProperty(
+        name="IES / LDT File", subtype="FILE_PATH", default="", options=_RELATIVE,
+        description="Measured light distribution (IES LM-63 .ies or EULUMDAT .ldt) used by the "
+                    "radiosity bake: the light's -Z is the nadir, its -Y the C0 plane"),
+    radiosity_ies_scale=EnumProperty(
+        name="Scale", default="POWER",
+        items=[("POWER", "Power",
+                "The file gives the shape, the light's power the total (as the plain light)"),
+               ("CYCLES", "Cycles IES",
+                "As Cycles' IES Texture node into the light's Emission strength: a 1 W light "
+                "emits the file's candela")],
+        description="What the light's power means with the distribution file"),
+)
+
 
 def register():
     for cls in CLASSES:
         bpy.utils.register_class(cls)
     bpy.types.Scene.radiosity = bpy.props.PointerProperty(type=RadiositySettings)
+    for name, prop in LIGHT_PROPERTIES.items():
+        setattr(bpy.types.Light, name, prop)
     bpy.types.WindowManager.radiosity_progress = FloatProperty(
         name="Progress", subtype="PERCENTAGE", min=0.0, max=100.0, options={"SKIP_SAVE"})
     bpy.types.WindowManager.radiosity_status = StringProperty(options={"SKIP_SAVE"})
 
 
 def unregister():
+    for name in LIGHT_PROPERTIES:
+        delattr(bpy.types.Light, name)
     del bpy.types.WindowManager.radiosity_status
     del bpy.types.WindowManager.radiosity_progress
     del bpy.types.Scene.radiosity

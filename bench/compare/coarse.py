@@ -257,13 +257,13 @@ def grid_blend(name, grid, cache):
 class Reference:
     """The converged Cycles reference of a pre-meshed copy and the measure against it."""
 
-    def __init__(self, name, blend, args, lights=None):
+    def __init__(self, name, blend, args, lights=None, world=None):
         from core.scene import make_scene
 
         self.name, self.blend = name, blend
         self.sc = cycles.load(str(blend))
         self.arrays = cycles.extract(self.sc)
-        self.scene = make_scene(**self.arrays, lights=lights)
+        self.scene = make_scene(**self.arrays, lights=lights, world=world)
         self.names = [str(s) for s in self.arrays["object_names"]]
         a = self.arrays
         emitter = np.any(a["emission"] > 0, axis=1)[a["face_materials"]]

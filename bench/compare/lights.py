@@ -6,7 +6,8 @@ included), a table and a cabinet as boxes of six quads. Three lightings, each it
 
 * ``point``: two point lights (radius 5 cm, soft falloff) under the ceiling;
 * ``spot``: a spot on the table (50 deg, blend 0.2) and a dim point light for the rest;
-* ``sun``: the sun through the window (angle 0.53 deg), nothing else (the world is black).
+* ``sun``: the sun through the window (angle 0.53 deg), nothing else (the world is black);
+* ``sky``: a uniform blue-white world seen through the window, nothing else.
 
 Reference: the mean of ``--reference-seeds`` Cycles bakes at ``--reference-samples`` of a copy
 meshed as a ``--grid`` metre grid (Cycles needs vertices to bake), lights identical. Ours: the
@@ -48,7 +49,11 @@ CASES = {
              dict(kind="point", name="Fill", position=(4.5, 3.5, 2.5), power=40.0, radius=0.05)],
     "sun": [dict(kind="sun", name="Sun", direction=(0.3, -1.0, -0.8), strength=5.0,
                  angle=np.radians(0.53), color=(1.0, 0.95, 0.9))],
+    "sky": [],
 }
+
+#: Uniform world radiance per case (black where absent).
+WORLDS = {"sky": (0.6, 0.7, 0.9)}
 
 
 def _box(lo, hi):
@@ -154,8 +159,12 @@ def reference_blend(case, grid, cache):
     if not path.exists():
         bpy.ops.wm.read_factory_settings(use_empty=True)
         sc = bpy.context.scene
-        world = bpy.data.worlds.new("Black")
-        world.color = (0.0, 0.0, 0.0)
+        world = bpy.data.worlds.new("World")
+        colour = WORLDS.get(case, (0.0, 0.0, 0.0))
+        world.color = colour
+        if bpy.app.version < (5, 0, 0):
+            world.use_nodes = True
+        world.node_tree.nodes["Background"].inputs["Color"].default_value = (*colour, 1.0)
         sc.world = world
         cycles.build(gridded(room_arrays(), grid), sc)
         add_lights(sc, CASES[case])
@@ -167,12 +176,14 @@ def run(case, args):
     from core.scene import make_scene
 
     blend = reference_blend(case, args.grid, args.cache)
-    ref = coarse.Reference("lights_%s" % case, blend, args, lights=CASES[case])
+    world = WORLDS.get(case)
+    ref = coarse.Reference("lights_%s" % case, blend, args, lights=CASES[case] or None,
+                           world=world)
     rows = []
     arrays = room_arrays()
     # the names bench.compare.cycles.build gave the reference's objects
     arrays["object_names"] = tuple("%03d_%s" % (i, n) for i, n in enumerate(arrays["object_names"]))
-    scene = make_scene(**arrays, lights=CASES[case])
+    scene = make_scene(**arrays, lights=CASES[case] or None, world=world)
     names = [str(n) for n in arrays["object_names"]]
     res, wall, cpu = coarse.timed_bake(scene, output_mode="mesh")
     m = res.output

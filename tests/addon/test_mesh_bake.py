@@ -88,3 +88,22 @@ def test_shared_mesh_needs_no_make_single_user(package):
     assert read_colours(floor.data).mean() > 2 * read_colours(twin.data).mean()
     assert bpy.ops.radiosity.clear() == {"FINISHED"}
     assert floor.data == shared and twin.data == shared
+
+
+def test_duplicate_floor_object_keeps_a_baked_surface(package):
+    # A floor left twice as two objects (an import leaves such copies): the core solves them as
+    # one surface; each object's baked mesh still holds the floor, with the same light.
+    floor, lamp = one_quad_room()
+    copy = bpy.data.objects.new("Floor.001", floor.data.copy())
+    copy.location, copy.rotation_euler = floor.location, floor.rotation_euler
+    bpy.context.scene.collection.objects.link(copy)
+    set_settings(bpy.context.scene, resolution=32)
+    assert bpy.ops.radiosity.bake() == {"FINISHED"}
+    report = json.loads(bpy.context.scene.radiosity.last_report)
+    assert any("duplicate" in w for w in report["warnings"]), report["warnings"]
+    a, b = floor.data, copy.data
+    assert write.is_baked(copy) and len(b.polygons) == len(a.polygons) > 1
+    ca, cb = read_colours(a), read_colours(b)
+    assert abs(ca.mean() - cb.mean()) < 1e-6 * ca.mean() and ca.mean() > 0
+    assert bpy.ops.radiosity.clear() == {"FINISHED"}
+    assert len(copy.data.polygons) == 1

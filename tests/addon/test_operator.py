@@ -373,18 +373,18 @@ def test_unsupported_lights_world_and_non_mesh_objects_are_named(package):
     curve = bpy.data.curves.new("Txt", "FONT")
     bpy.context.scene.collection.objects.link(bpy.data.objects.new("Label", curve))
     bpy.context.scene.collection.objects.link(bpy.data.objects.new("Empty", None))
-    world = bpy.data.worlds.new("Sky")
-    world.color = (0.2, 0.3, 0.5)
+    world = bpy.data.worlds.new("Sky")        # a textured world: not baked yet (a uniform one is)
     if bpy.app.version < (5, 0, 0):
-        world.use_nodes = False
-    else:
-        world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.2, 0.3, 0.5, 1)
+        world.use_nodes = True
+    nodes = world.node_tree.nodes
+    sky = nodes.new("ShaderNodeTexSky")
+    world.node_tree.links.new(sky.outputs["Color"], nodes["Background"].inputs["Color"])
     bpy.context.scene.world = world
     report = bake_ok(patch_size=0.5, resolution=16)
     text = " | ".join(report["warnings"])
     assert "'Bulb'" not in text       # point lights are baked (tests/addon/test_lights.py)
     assert "non-uniform scale" in text and "'Oval'" in text
-    assert "'Label'" in text and "World 'Sky'" in text
+    assert "'Label'" in text and "World 'Sky' lighting (textured)" in text
 
 
 def test_area_lights_match_an_emitting_polygon_of_the_converted_radiance(package):

@@ -103,3 +103,33 @@ def test_duplicate_groups_keep_the_lowest_face():
     scene = _room([(FLOOR, "A"), (FLOOR[::-1], "B")])
     dup = find_duplicates(scene)
     assert dup[-1] == 0 and dup[-2] == 0 and np.count_nonzero(dup >= 0) == 2
+
+
+@pytest.mark.parametrize("variant", ["same", "flipped"])
+def test_duplicate_floor_object_keeps_its_faces_in_the_radiosity_mesh(variant):
+    """In the radiosity mesh a duplicate (which makes no patches) gets a copy of the kept face's
+    output faces: the object it belongs to keeps a surface, at the same places, with the same
+    colours, wound its own way."""
+    quad = FLOOR.copy()[::-1] if variant == "flipped" else FLOOR.copy()
+    scene = _room([(quad, "Floor.001")])
+    res = bake(scene, BakeSettings(seed=7, element_levels=0))
+    m = res.output
+    dup = scene.n_faces - 1
+    mine, floor = m.faces_of(np.array([dup])), m.faces_of(np.array([0]))
+    assert mine.size == floor.size > 1
+    face_of = m.face_of_corner()
+    a, b = np.isin(face_of, mine), np.isin(face_of, floor)
+    key = lambda pts, col: np.lexsort(np.c_[col, pts].T)
+    pa, pb = m.vertices[m.corner_verts[a]], m.vertices[m.corner_verts[b]]
+    ca, cb = m.corner_colours[a], m.corner_colours[b]
+    np.testing.assert_array_equal(pa[key(pa, ca)], pb[key(pb, cb)])
+    np.testing.assert_array_equal(ca[key(pa, ca)], cb[key(pb, cb)])
+    # wound the duplicate's way: the copies' normals follow the duplicate's normal
+    f = mine[0]
+    tri = m.vertices[m.corner_verts[m.face_starts[f]:m.face_starts[f] + 3]]
+    n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+    assert n @ scene.face_normals[dup] > 0
+    # every corner of a copy interpolates the duplicate's own corners
+    src = m.corner_sources[a]
+    assert np.all((src >= scene.face_starts[dup]) & (src < scene.face_starts[dup] + 4))
+    assert res.report["mesh"]["per_object"]["Floor.001"]["output_faces"] == mine.size
