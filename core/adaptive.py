@@ -9,9 +9,10 @@ leaves are split where
 * the luminance differs between the leaf's vertices by more than ``contrast`` relative to the
   brighter one, never relative to less than ``DARK_FLOOR`` x the scene's mean luminance, so that
   darkness does not refine for ever (contrast-driven meshing, Lightscape, Blender 2.4x);
-* the emitters' visibility differs between the leaf's vertices (a shadow boundary passes: one
-  shadow ray from every vertex to each of ``SHADOW_SAMPLES`` fixed points on the emitters) and
-  the contrast exceeds ``SHADOW_CONTRAST`` x ``contrast``;
+* the emitters' or lights' visibility differs between the leaf's vertices (a shadow boundary
+  passes: one shadow ray from every vertex to each of ``SHADOW_SAMPLES`` fixed points on the
+  emitters, and to each light's centre) and the contrast exceeds ``SHADOW_CONTRAST`` x
+  ``contrast``, even where the light across the parent looked linear;
 * a contact line runs along the leaf (the light falls off steeply towards an object's foot) and
   the leaf is larger than ``CONTACT_ELEMENT``;
 

@@ -201,6 +201,30 @@ def scenario():
     yield 1.0
     screenshot("advanced_open.png")
 
+    # The light's panel: a spot light made active, Properties > Light data shows its Radiosity
+    # panel (the IES / EULUMDAT file field).
+    lamp = bpy.data.objects.new("Spot", bpy.data.lights.new("Spot", "SPOT"))
+    lamp.location = (0.0, 0.0, 0.5)
+    bpy.context.scene.collection.objects.link(lamp)
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(False)
+    lamp.select_set(True)
+    bpy.context.view_layer.objects.active = lamp
+    redraw()
+    yield 0.5                       # the Properties editor offers the Light tab after a redraw
+    props = [a for a in window.screen.areas if a.type == "PROPERTIES"]
+    results["light_panel_poll"] = None
+    if props:
+        props[0].spaces[0].context = "DATA"
+        redraw()
+        yield 1.0
+        with bpy.context.temp_override(window=window, area=props[0]):
+            panel = getattr(bpy.types, "DATA_PT_radiosity_light", None)
+            results["light_panel_poll"] = bool(panel and panel.poll(bpy.context))
+        screenshot("light_panel.png")
+    bpy.data.objects.remove(lamp)
+    yield 0.3
+
     # 3. Disable and enable the extension (unregister, register) as Preferences does.
     bpy.ops.preferences.addon_disable(module=MODULE)
     yield 0.3

@@ -128,8 +128,15 @@ def test_register_unregister_and_quit_mid_bake_leave_no_traceback(session):
             assert bad not in logs[name], f"{bad!r} in {name}:\n{logs[name][-3000:]}"
 
 
+def test_light_panel_shows_for_a_spot_light(session):
+    """Properties > Light data of a spot light shows the Radiosity panel (its poll passes in
+    the real window's Properties editor; the screenshot light_panel.png shows it)."""
+    results, _ = session
+    assert results["light_panel_poll"] is True
+
+
 @pytest.mark.parametrize("name", ["before_bake.png", "during_bake.png", "after_bake.png",
-                                  "advanced_open.png"])
+                                  "advanced_open.png", "light_panel.png"])
 def test_screenshot_is_not_blank(session, name):
     from PIL import Image
 
