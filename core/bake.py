@@ -274,7 +274,8 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     t0 = time.perf_counter()
     direct = kept.direct if kept is not None else None
     if direct is None and (scene.lights is not None or scene.world is not None):
-        direct = DirectLight(scene.lights, patches, settings.light_samples, scene.world)
+        direct = DirectLight(scene.lights, patches, settings.light_samples, scene.world,
+                             min_size=settings.min_element)
     nodes = node_arrays(scene, patches, settings.two_sided, direct)
     if direct is not None:
         timings["lights"] = time.perf_counter() - t0

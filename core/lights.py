@@ -68,6 +68,15 @@ PATCH_SAMPLES = 4
 #: along its normal, so that they do not hit the receiver's own surface.
 RAY_OFFSET = 1e-6
 
+#: At each point, the lights whose unshadowed light there adds up to at most this fraction of
+#: the point's unshadowed total (luminance) cast no shadow rays and count as unshadowed: the
+#: direct light is then at most this fraction too high where those lights are in fact hidden,
+#: and a grid of downlights costs shadow rays to the few that matter at each point.
+CULL = 0.01
+
+#: Rec. 709 luminance weights (the culling's measure of a light's share).
+LUMA = np.array([0.2126, 0.7152, 0.0722])
+
 #: A light's centre-visibility bit per light, in the bits above the emitter samples' bits
 #: (core.criteria): lights beyond this many share bits (modulo).
 VISIBILITY_BITS = 40
@@ -367,9 +376,14 @@ class DirectLight:
     world : (3,) float or None
         Radiance of a uniform world: :meth:`extra` adds it for the part of a receiver's
         hemisphere that no surface covers.
+    min_size : float
+        The smallest element the output can show (m). A light whose penumbrae are narrower
+        (a point or spot light of radius below it, a sun whose angle's tangent times the scene's
+        extent is below it) casts one shadow ray per point, to its centre: its shadows are hard,
+        which no element could tell from soft.
     """
 
-    def __init__(self, lights, patches, samples=16, world=None):
+    def __init__(self, lights, patches, samples=16, world=None, min_size=0.0):
         self.lights = lights if lights is not None else make_lights([])
         self.world = None if world is None else np.asarray(world, dtype=np.float64)
         self.samples = int(samples)
@@ -379,6 +393,8 @@ class DirectLight:
         self.offset = RAY_OFFSET * max(extent, 1.0)
         self.extent = max(extent, np.finfo(float).tiny)
         self.rays = 0
+        self.culled = 0                     # (point, light) pairs that cast no shadow rays
+        self.min_size = float(min_size)
         self._patch_cache = None
 
     def __len__(self):
@@ -412,11 +428,51 @@ class DirectLight:
         lt = self.lights
         return lt.intensity[j] if j < lt.n_points else lt.sun_irradiance[j - lt.n_points]
 
+    def _unshadowed(self, j, origin, normals):
+        """Light j at the points before shadows: (bare, scale, ldir, dist, size), see
+        :meth:`_per_light` (``dist`` None for a sun; ``size`` its radius, or its angle's
+        tangent)."""
+        lt = self.lights
+        if j < lt.n_points:
+            d = lt.position[j] - origin
+            dist2 = np.einsum("ij,ij->i", d, d)
+            dist = np.sqrt(dist2)
+            ldir = d / np.maximum(dist, 1e-300)[:, None]
+            cos_r = np.einsum("ij,ij->i", ldir, normals)
+            r = lt.radius[j]
+            bare = np.where(cos_r > 0, cos_r / np.maximum(dist2, 1e-300), 0.0)
+            fall = dist2 + (r * r if lt.soft[j] else 0.0)
+            scale = np.where(cos_r > 0, cos_r / np.maximum(fall, 1e-300), 0.0)
+            if lt.cos_half[j] > -1.0:
+                scale *= spot_factor(-(ldir @ lt.axis[j]), lt.cos_half[j], lt.smooth[j])
+            if lt.profiles and lt.profiles[j] is not None:
+                scale *= lt.profiles[j].factor(-ldir)
+            return bare, scale, ldir, dist, r
+        s = j - lt.n_points
+        ldir = np.broadcast_to(lt.sun_direction[s], origin.shape)
+        bare = np.maximum(normals @ lt.sun_direction[s], 0.0)
+        return bare, bare.copy(), ldir, None, np.tan(lt.sun_half_angle[s])
+
+    def _culled(self, origin, normals):
+        """(n, m) bool: the lights each point casts no shadow rays to (:data:`CULL`)."""
+        m = len(self.lights)
+        n = origin.shape[0]
+        if m < 2 or CULL <= 0:
+            return np.zeros((n, m), dtype=bool)
+        y = np.stack([self._unshadowed(j, origin, normals)[1] * float(self._colour(j) @ LUMA)
+                      for j in range(m)], axis=1)
+        order = np.argsort(y, axis=1, kind="stable")
+        cum = np.cumsum(np.take_along_axis(y, order, axis=1), axis=1)
+        drop = cum <= CULL * cum[:, -1:]
+        out = np.zeros((n, m), dtype=bool)
+        np.put_along_axis(out, order, drop, axis=1)
+        return out
+
     def _per_light(self, points, normals, samples):
         """Per light j: (j, bare, scale, centre), each (n,): ``bare`` the point light's
         cos / d^2 (a sun's cos) before shadows, cone, photometry and soft falloff, ``scale`` the
         factor of the light's colour in the irradiance, ``centre`` the light's centre lights the
-        point."""
+        point. Lights culled at a point (:data:`CULL`) count as unshadowed there."""
         normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
         k = self.samples if samples is None else int(samples)
         lt = self.lights
@@ -425,35 +481,17 @@ class DirectLight:
             return
         origin = points + self.offset * normals
         turn = _turn(points / self.extent)          # the same pattern at any scale
+        culled = self._culled(origin, normals)
         for j in range(len(lt)):
-            if j < lt.n_points:
-                d = lt.position[j] - origin
-                dist2 = np.einsum("ij,ij->i", d, d)
-                dist = np.sqrt(dist2)
-                ldir = d / np.maximum(dist, 1e-300)[:, None]
-                cos_r = np.einsum("ij,ij->i", ldir, normals)
-                r = lt.radius[j]
-                bare = np.where(cos_r > 0, cos_r / np.maximum(dist2, 1e-300), 0.0)
-                fall = dist2 + (r * r if lt.soft[j] else 0.0)
-                scale = np.where(cos_r > 0, cos_r / np.maximum(fall, 1e-300), 0.0)
-                if lt.cos_half[j] > -1.0:
-                    scale *= spot_factor(-(ldir @ lt.axis[j]), lt.cos_half[j], lt.smooth[j])
-                if lt.profiles and lt.profiles[j] is not None:
-                    scale *= lt.profiles[j].factor(-ldir)
-                size = r
-            else:
-                s = j - lt.n_points
-                ldir = np.broadcast_to(lt.sun_direction[s], origin.shape)
-                cos_r = normals @ lt.sun_direction[s]
-                bare = np.maximum(cos_r, 0.0)
-                scale = bare.copy()
-                size = np.tan(lt.sun_half_angle[s])
-                dist = None
+            bare, scale, ldir, dist, size = self._unshadowed(j, origin, normals)
             centre = scale > 0
-            go = np.flatnonzero(centre)
+            go = np.flatnonzero(centre & ~culled[:, j])
+            self.culled += int(np.count_nonzero(centre & culled[:, j]))
             if go.size and lt.shadow[j] and np.any(self._colour(j) > 0):
+                penumbra = size if dist is not None else size * self.extent
+                rays = k if size > 0 and penumbra >= self.min_size else 1
                 frac, clear = self._visible(origin[go], ldir[go], dist if dist is None
-                                            else dist[go], size, k if size > 0 else 1, turn[go])
+                                            else dist[go], size, rays, turn[go])
                 scale[go] *= frac
                 centre[go] = clear
             yield j, bare, scale, centre

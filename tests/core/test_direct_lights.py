@@ -221,3 +221,49 @@ def test_lights_only_scene_is_accepted_and_no_light_is_refused():
 def test_bad_lights_are_named(light, match):
     with pytest.raises(SceneError, match=match):
         make_lights([light])
+
+
+def test_culled_lights_err_by_at_most_their_share(monkeypatch):
+    """One bright light and six dim ones hidden from the floor by a black plate. The dim ones'
+    unshadowed light is well under CULL of the total at every floor point: they cast no shadow
+    rays there and count as unshadowed, so the floor reads too bright by at most CULL x the
+    unshadowed total, and the shadow rays drop."""
+    import core.lights as lights_module
+
+    plate = [[-3.0, -3.0, 1.0], [-3.0, 3.0, 1.0], [3.0, 3.0, 1.0], [3.0, -3.0, 1.0]]  # faces down
+    bright = dict(kind="point", name="Bright", position=(0.0, 0.0, 0.8), power=100.0)
+    dim = [dict(kind="point", name=f"Dim {i}", position=(x, y, 2.0), power=0.05)
+           for i, (x, y) in enumerate([(-1, -1), (1, -1), (-1, 1), (1, 1), (0, 1.5), (1.5, 0)])]
+    scene = _floor(lights=[bright] + dim, extra=[plate])
+    patches = make_patches(scene, 0.5)
+    pts = np.stack(np.meshgrid(np.linspace(-1.9, 1.9, 12), np.linspace(-1.9, 1.9, 12)),
+                   axis=-1).reshape(-1, 2)
+    pts = np.c_[pts, np.zeros(len(pts))]
+    up = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+    culled = DirectLight(scene.lights, patches)
+    got = culled.incident(pts, up)[:, 0]
+    share = lights_module.CULL
+    monkeypatch.setattr(lights_module, "CULL", 0.0)
+    exact = DirectLight(scene.lights, patches)
+    want = exact.incident(pts, up)[:, 0]
+    total = sum(_point_closed_form(scene.lights, pts, j) for j in range(7)) / np.pi
+    assert culled.culled > 0 and culled.rays < exact.rays
+    assert np.all(got >= want - 1e-12)
+    assert np.all(got - want <= share * total + 1e-12)
+
+
+def test_a_light_smaller_than_the_smallest_element_casts_one_ray():
+    plate = [[-0.5, -0.5, 1.0], [-0.5, 0.5, 1.0], [0.5, 0.5, 1.0], [0.5, -0.5, 1.0]]
+    light = dict(kind="point", name="LED", position=(0.0, 0.0, 2.0), power=50.0, radius=0.02)
+    scene = _floor(lights=[light], extra=[plate])
+    patches = make_patches(scene, 0.5)
+    pts = np.c_[np.linspace(-1.9, 1.9, 50), np.zeros(50), np.zeros(50)]
+    up = np.tile([0.0, 0.0, 1.0], (50, 1))
+    hard = DirectLight(scene.lights, patches, min_size=0.05)
+    soft = DirectLight(scene.lights, patches, min_size=0.0)
+    h, s = hard.incident(pts, up)[:, 0], soft.incident(pts, up)[:, 0]
+    assert hard.rays == 50 and soft.rays >= 9 * 50
+    # hard and soft agree away from the 2 cm penumbrae around x = +-1 (the plate's shadow edge)
+    away = np.abs(np.abs(pts[:, 0]) - 1.0) > 0.05
+    np.testing.assert_allclose(h[away], s[away], rtol=1e-12)
+    assert np.all(h[np.abs(pts[:, 0]) < 0.9] == 0)

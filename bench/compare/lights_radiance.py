@@ -1,0 +1,114 @@
+"""Radiance's view of the lights benchmark's daylight cases: irradiance at the room's ceiling and
+walls, ours against ``rtrace -I`` (a second, independent program beside Cycles).
+
+The room and lights of :mod:`bench.compare.lights`, written as a .rad file
+(:func:`bench.compare.radiance.to_rad`) plus:
+
+* ``sun``: ``light`` of radiance S / omega on a ``source`` of the sun's angular diameter, omega
+  its solid angle (Radiance's sun: irradiance S on a surface facing it);
+* ``sky``: a ``glow`` of the world's radiance on a full-sphere ``source`` (what a uniform world
+  is).
+
+Sensors: 48 points on the ceiling (facing down) and 60 on two walls (facing in), none of them in
+direct light. Ours: a hemicube (R = 256) at the same points over a uniform 0.25 m bake's solved
+patches, plus the lights' direct light and the world's uncovered part (``DirectLight.extra``).
+Radiance: ``-ab 10 -ad 4096 -aa 0`` (no irradiance cache: every sensor sampled).
+
+Run::
+
+    .venv/bin/python -m bench.compare.lights_radiance          # ~1 min
+
+Prints, per case and surface, the mean irradiance (RGB) of both and their ratio.
+"""
+
+import argparse
+import math
+
+import numpy as np
+
+from . import radiance
+from .lights import CASES, WORLDS, room_arrays
+
+PARAMS = ("-ab", "10", "-ad", "4096", "-as", "0", "-aa", "0", "-lw", "1e-6", "-lr", "-12",
+          "-dj", "0", "-ds", "0", "-dt", "0", "-dc", "1", "-dr", "0", "-ss", "0", "-st", "1")
+
+#: Sensors sit this far (m) in front of their surface for our hemicube (Radiance lifts its own).
+LIFT = 1e-4
+
+
+def sources(case):
+    """Radiance text of the case's sun or sky."""
+    if case == "sun":
+        sun = CASES["sun"][0]
+        d = np.asarray(sun["direction"], float)
+        towards = -d / np.linalg.norm(d)
+        deg = math.degrees(sun["angle"])
+        omega = 2 * math.pi * (1 - math.cos(math.radians(deg / 2)))
+        radiance_ = sun["strength"] * np.asarray(sun["color"], float) / omega
+        return ("void light solar 0 0 3 %s\nsolar source sun 0 0 4 %s %.9g\n"
+                % (radiance._fmt(radiance_), radiance._fmt(towards), deg))
+    if case == "sky":
+        return ("void glow skyglow 0 0 4 %s 0\nskyglow source sky 0 0 4 0 0 1 360\n"
+                % radiance._fmt(WORLDS["sky"]))
+    raise ValueError("case must be 'sun' or 'sky'; got %r" % (case,))
+
+
+def sensors():
+    """(points, normals, labels) on the ceiling and on the walls x = 5 and y = 0."""
+    xs, ys, zs = np.linspace(0.3, 4.7, 8), np.linspace(0.3, 3.7, 6), np.linspace(0.3, 2.4, 5)
+    ceiling = [[x, y, 2.7] for x in xs for y in ys]
+    walls = [[5.0, y, z] for y in ys for z in zs] + \
+        [[x, 0.0, z] for x in np.linspace(0.7, 4.7, 6) for z in zs]
+    points = np.array(ceiling + walls, float)
+    normals = np.array([[0, 0, -1.0]] * len(ceiling) + [[-1.0, 0, 0]] * 30 + [[0, 1.0, 0]] * 30)
+    labels = np.array(["ceiling"] * len(ceiling) + ["walls"] * 60)
+    return points, normals, labels
+
+
+def ours(case, points, normals):
+    from core.bake import bake
+    from core.hemicube import point_rows
+    from core.lights import DirectLight
+    from core.scene import make_scene
+    from core.settings import BakeSettings
+
+    scene = make_scene(**room_arrays(), lights=CASES[case] or None, world=WORLDS.get(case))
+    res = bake(scene, BakeSettings(output_mode="vertices", patch_size=0.25, element_levels=0))
+    at = points + LIFT * normals
+    rows = point_rows(res.patches, at, normals, resolution=256)
+    extra = DirectLight(scene.lights, res.patches, world=scene.world).extra(at, normals,
+                                                                           rows.sum(axis=1))
+    return np.pi * (rows @ res.node_radiance + extra)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--cases", nargs="+", default=["sun", "sky"], choices=["sun", "sky"])
+    ap.add_argument("--nproc", type=int, default=2)
+    args = ap.parse_args(argv)
+    points, normals, labels = sensors()
+    to_rad = radiance.to_rad
+    for case in args.cases:
+        extra = sources(case)
+
+        def with_source(arrays, two_sided_lights=True, emitter="glow"):
+            return to_rad(arrays, two_sided_lights, emitter) + extra
+
+        radiance.to_rad = with_source
+        try:
+            E_rad, seconds = radiance.irradiance(room_arrays(), points, normals, params=PARAMS,
+                                                 nproc=args.nproc)
+        finally:
+            radiance.to_rad = to_rad
+        E_ours = ours(case, points, normals)
+        for where in ("ceiling", "walls"):
+            m = labels == where
+            a, b = E_ours[m].mean(axis=0), E_rad[m].mean(axis=0)
+            print("%s %-7s ours %s  Radiance %s  ratio %s" % (
+                case, where, np.array2string(a, precision=4), np.array2string(b, precision=4),
+                np.array2string(a / b, precision=3)))
+        print("%s: Radiance %.1f s" % (case, seconds))
+
+
+if __name__ == "__main__":
+    main()
