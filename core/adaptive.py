@@ -219,7 +219,9 @@ class AdaptiveState:
     user : (C,) int64
         Output corner whose colour each user corner takes (-1: none, a dropped face).
     direct : (U, 3) float64
-        Direct light (irradiance / pi) of the point, spot and sun lights at the U points.
+        Light from beyond the hemicube's surfaces (irradiance / pi,
+        :meth:`core.lights.DirectLight.extra`: the lights' direct light and the world's
+        share) at the U points.
     """
 
     def __init__(self, **kw):

@@ -295,7 +295,6 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
                           skip_late=skip_late, all_nodes=world)
     monitor.update(1.0, "form factors done")
     timings["form_factors"] = time.perf_counter() - t0
-    lit_nodes = nodes
     nodes = with_world(nodes, ff.store.row_sums, scene.world)
 
     monitor.stage(*_STAGES["solve"])
@@ -312,9 +311,9 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     # The world lights every side open to it alike: which side faces the room is decided by the
     # rest of the light.
     oriented = sol
-    if nodes is not lit_nodes:
-        sky = nodes.direct - (lit_nodes.direct if lit_nodes.direct is not None else 0.0)
-        oriented = dataclasses.replace(sol, incident=sol.incident - sky * nodes.areas[:, None])
+    if nodes.sky is not None:
+        oriented = dataclasses.replace(sol,
+                                       incident=sol.incident - nodes.sky * nodes.areas[:, None])
     side = orient(scene, patches, oriented.incident, settings.two_sided,
                   kept.flipped if kept is not None else None, ff.store.row_sums)
     room_side = side.room_side(sol.node_radiance)

@@ -162,6 +162,7 @@ def copy_duplicate_faces(scene, mesh):
     if dup_of is None or not np.any(dup_of >= 0):
         return mesh, source
     face_of = mesh.face_of_corner()
+    to_dup = np.full(scene.n_corners, -1, dtype=np.int64)   # kept face's corner -> duplicate's
     parts = dict(corner_verts=[mesh.corner_verts], face_sizes=[mesh.face_sizes],
                  face_parent=[mesh.face_parent], corner_colours=[mesh.corner_colours],
                  corner_sources=[mesh.corner_sources], corner_weights=[mesh.corner_weights],
@@ -182,14 +183,12 @@ def copy_duplicate_faces(scene, mesh):
         ds = scene.face_starts[d] + np.arange(scene.face_sizes[d])
         pk = scene.vertices[scene.corner_verts[ks]]
         pd = scene.vertices[scene.corner_verts[ds]]
-        nearest = ds[np.argmin(np.linalg.norm(pk[:, None] - pd[None], axis=2), axis=1)]
-        to_dup = dict(zip(ks.tolist(), nearest.tolist()))
-        src = mesh.corner_sources[corners]
+        to_dup[ks] = ds[np.argmin(np.linalg.norm(pk[:, None] - pd[None], axis=2), axis=1)]
         parts["corner_verts"].append(mesh.corner_verts[corners])
         parts["face_sizes"].append(sizes)
         parts["face_parent"].append(np.full(faces.size, d, dtype=np.int64))
         parts["corner_colours"].append(mesh.corner_colours[corners])
-        parts["corner_sources"].append(np.vectorize(to_dup.get, otypes=[np.int64])(src))
+        parts["corner_sources"].append(to_dup[mesh.corner_sources[corners]])
         parts["corner_weights"].append(mesh.corner_weights[corners])
         parts["source"].append(corners)
     sizes = np.concatenate(parts["face_sizes"])

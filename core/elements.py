@@ -43,8 +43,9 @@ class Elements:
     levels : list of dict
         Per level: ``split`` (patches or elements split) and ``elements`` (count after it).
     direct : (K, 3) float64 or None
-        Direct light (irradiance / pi) of the point, spot and sun lights at the centres of
-        ``computed``.
+        Light from beyond the hemicube's surfaces (irradiance / pi,
+        :meth:`core.lights.DirectLight.extra`: the lights' direct light and the world's
+        share) at the centres of ``computed``.
     """
 
     def __init__(self, patches, parent, computed, rows, levels, direct=None):

@@ -195,7 +195,7 @@ def ray_triangles(patches):
     return tris, np.repeat(np.arange(c.shape[0]), 2)
 
 
-def _bilinear(corners, u, v):
+def bilinear(corners, u, v):
     """Points and area Jacobians of the bilinear map of quads at (u, v).
 
     corners : (M, 4, 3); u, v : (M, R). Returns points (M, R, 3) and jacobian (M, R).
@@ -217,7 +217,7 @@ def _stratified(rng, m, rays):
     return (cell % nx + j[..., 0]) / nx, (cell // nx + j[..., 1]) / ny
 
 
-def _gauss_square(order):
+def gauss_square(order):
     """Gauss-Legendre nodes and weights on [0, 1]^2: u, v, w of shape (order^2,), sum w = 1."""
     g, w = np.polynomial.legendre.leggauss(order)
     g, w = (g + 1) / 2, w / 2
@@ -293,7 +293,7 @@ def _source_average(geo, patch, n, targets, order):
         gu = gv = np.array([0.5])
         gw = np.array([1.0])
     else:
-        gu, gv, gw = _gauss_square(order)
+        gu, gv, gw = gauss_square(order)
     k = gu.size
     step = max(1, PAIR_CHUNK * 8 // k)
     for a in range(0, m, step):
@@ -303,7 +303,7 @@ def _source_average(geo, patch, n, targets, order):
             xs = geo.centres[pa][:, None, :]
             ws = np.ones((mm, 1))
         else:
-            xs, jac = _bilinear(geo.corners[pa], np.broadcast_to(gu, (mm, k)),
+            xs, jac = bilinear(geo.corners[pa], np.broadcast_to(gu, (mm, k)),
                                 np.broadcast_to(gv, (mm, k)))
             ws = gw * jac
             ws = ws / ws.sum(axis=1, keepdims=True)
@@ -364,11 +364,11 @@ def _visible_fraction(geo, src, n, tgt, rays, rng, area_source):
     m = src.size
     if area_source:
         su, sv = _stratified(rng, m, rays)
-        xs, _ = _bilinear(geo.corners[src], su, sv)
+        xs, _ = bilinear(geo.corners[src], su, sv)
     else:
         xs = np.broadcast_to(geo.centres[src][:, None, :], (m, rays, 3))
     tu, tv = _stratified(rng, m, rays)
-    y, jac = _bilinear(geo.corners[tgt], tu, tv)
+    y, jac = bilinear(geo.corners[tgt], tu, tv)
     origin = xs + geo.offset * n[:, None, :]
     d = y - origin
     dist2 = np.einsum("mrj,mrj->mr", d, d)

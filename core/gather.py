@@ -146,7 +146,9 @@ def gathered_colours(scene, groups, store, node_radiance, fallback, direct=None)
     fallback : (C, 3) float
         Colours for corners of dropped faces (group -1).
     direct : (G, 3) float, optional
-        Direct light (irradiance / pi) of the point, spot and sun lights at every group.
+        Light from beyond the hemicube's surfaces (irradiance / pi,
+        :meth:`core.lights.DirectLight.extra`: the lights' direct light and the world's
+        share) at every group.
 
     Returns
     -------

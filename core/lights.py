@@ -45,7 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import SceneError
-from .exact import ray_triangles
+from .exact import bilinear, gauss_square, ray_triangles
 from .photometry import CYCLES_CANDELA_TO_WATT, Photometry
 from .raycast import any_hit, build_bvh
 
@@ -149,9 +149,10 @@ class Lights:
                       self.shadow, self.sun_direction, self.sun_irradiance, self.sun_half_angle,
                       self.profiles)
 
-    def power(self):
-        """(3,) total power (W) of the point and spot lights as if isotropic (4 pi I)."""
-        return 4.0 * np.pi * self.intensity.sum(axis=0)
+    @property
+    def shines(self):
+        """Whether any light gives light (power or strength > 0)."""
+        return bool(np.any(self.intensity > 0) or np.any(self.sun_irradiance > 0))
 
 
 def _vec(light, key, label, default=None, length=3):
@@ -453,14 +454,15 @@ class DirectLight:
         bare = np.maximum(normals @ lt.sun_direction[s], 0.0)
         return bare, bare.copy(), ldir, None, np.tan(lt.sun_half_angle[s])
 
-    def _culled(self, origin, normals):
-        """(n, m) bool: the lights each point casts no shadow rays to (:data:`CULL`)."""
-        m = len(self.lights)
-        n = origin.shape[0]
+    def _culled(self, unshadowed):
+        """(n, m) bool: the lights each point casts no shadow rays to (:data:`CULL`), from
+        every light's :meth:`_unshadowed`."""
+        m = len(unshadowed)
+        n = unshadowed[0][1].shape[0] if m else 0
         if m < 2 or CULL <= 0:
             return np.zeros((n, m), dtype=bool)
-        y = np.stack([self._unshadowed(j, origin, normals)[1] * float(self._colour(j) @ LUMA)
-                      for j in range(m)], axis=1)
+        y = np.stack([u[1] * float(self._colour(j) @ LUMA) for j, u in enumerate(unshadowed)],
+                     axis=1)
         order = np.argsort(y, axis=1, kind="stable")
         cum = np.cumsum(np.take_along_axis(y, order, axis=1), axis=1)
         drop = cum <= CULL * cum[:, -1:]
@@ -481,9 +483,9 @@ class DirectLight:
             return
         origin = points + self.offset * normals
         turn = _turn(points / self.extent)          # the same pattern at any scale
-        culled = self._culled(origin, normals)
-        for j in range(len(lt)):
-            bare, scale, ldir, dist, size = self._unshadowed(j, origin, normals)
+        unshadowed = [self._unshadowed(j, origin, normals) for j in range(len(lt))]
+        culled = self._culled(unshadowed)
+        for j, (bare, scale, ldir, dist, size) in enumerate(unshadowed):
             centre = scale > 0
             go = np.flatnonzero(centre & ~culled[:, j])
             self.culled += int(np.count_nonzero(centre & culled[:, j]))
@@ -559,19 +561,12 @@ class DirectLight:
 
     def _patch_incident(self, patches, two_sided):
         P = patches.areas.size
-        g, w = np.polynomial.legendre.leggauss(PATCH_ORDER)
-        g, w = (g + 1) / 2, w / 2
-        u, v = np.repeat(g, PATCH_ORDER), np.tile(g, PATCH_ORDER)
-        wt = np.outer(w, w).ravel()
-        c = np.asarray(patches.corners, dtype=np.float64)
-        c0, c1, c2, c3 = (c[:, None, i] for i in range(4))
-        uu, vv = u[None, :, None], v[None, :, None]
-        pts = (1 - uu) * (1 - vv) * c0 + uu * (1 - vv) * c1 + uu * vv * c2 + (1 - uu) * vv * c3
-        du = (1 - vv) * (c1 - c0) + vv * (c2 - c3)
-        dv = (1 - uu) * (c3 - c0) + uu * (c2 - c1)
-        jac = np.linalg.norm(np.cross(du, dv), axis=-1) * wt[None]          # (P, R)
-        jac /= np.maximum(jac.sum(axis=1, keepdims=True), 1e-300)
+        u, v, wt = gauss_square(PATCH_ORDER)
         R = u.size
+        c = np.asarray(patches.corners, dtype=np.float64)
+        pts, jac = bilinear(c, np.broadcast_to(u, (P, R)), np.broadcast_to(v, (P, R)))
+        jac = jac * wt[None]                                                 # (P, R)
+        jac /= np.maximum(jac.sum(axis=1, keepdims=True), 1e-300)
         nrm = np.repeat(patches.normals, R, axis=0)
         flat = pts.reshape(-1, 3)
         out = np.zeros((2 * P, 3))

@@ -68,6 +68,8 @@ class Nodes:
     direct : (2P, 3) float64 or None
         Mean irradiance / pi of every node from the point, spot and sun lights
         (:meth:`core.lights.DirectLight.patch_incident`); None: no such lights.
+    sky : (2P, 3) float64 or None
+        Irradiance / pi of every node from a uniform world (:func:`with_world`); None: none.
     """
 
     rho: np.ndarray
@@ -75,14 +77,24 @@ class Nodes:
     areas: np.ndarray
     allowed: np.ndarray
     direct: np.ndarray = None
+    sky: np.ndarray = None
+
+    @property
+    def arriving(self):
+        """(2P, 3) irradiance / pi from outside the surfaces' exchange (lights and world), or
+        None."""
+        if self.sky is None:
+            return self.direct
+        return self.sky if self.direct is None else self.sky + self.direct
 
     @property
     def source(self):
         """(2P, 3) what each node sends before any bounce between surfaces: its emission plus
         the direct light it reflects, ``Le + rho E / pi`` (lights shot first)."""
-        if self.direct is None:
+        arriving = self.arriving
+        if arriving is None:
             return self.le
-        return self.le + self.rho * self.direct
+        return self.le + self.rho * arriving
 
     @property
     def emitting(self):
@@ -91,17 +103,15 @@ class Nodes:
 
 
 def with_world(nodes, row_sums, world):
-    """``nodes`` with a uniform world's light added to ``direct``: ``world x (1 - row sum)``
-    for every node with a row (the part of its hemicube that no surface covers)."""
+    """``nodes`` with a uniform world's light as ``sky``: ``world x (1 - row sum)`` for every
+    node with a row (the part of its hemicube that no surface covers)."""
     if world is None:
         return nodes
     s = np.asarray(row_sums, dtype=np.float64)
     sky = np.where(np.isfinite(s), np.clip(1.0 - s, 0.0, 1.0), 0.0)
     sky = np.where(nodes.allowed, sky, 0.0)
-    direct = sky[:, None] * np.asarray(world, dtype=np.float64)[None, :]
-    if nodes.direct is not None:
-        direct = direct + nodes.direct
-    return dataclasses.replace(nodes, direct=direct)
+    return dataclasses.replace(nodes,
+                               sky=sky[:, None] * np.asarray(world, dtype=np.float64)[None, :])
 
 
 def node_arrays(scene, patches, two_sided, direct=None):
@@ -310,8 +320,8 @@ def _solve_dense(ff, nodes, settings, solver, monitor):
     H = np.zeros((N, 3))
     H[idx] = matvec(F, L)
     incident = H * areas[:, None]
-    if nodes.direct is not None:            # the lights' direct light arrives too
-        incident += nodes.direct * areas[:, None]
+    if nodes.arriving is not None:          # the lights' and the world's light arrives too
+        incident += nodes.arriving * areas[:, None]
     sent = areas[idx, None] * L                              # (n_a, 3)
     if black_block is not None:
         incident[black] = black_block.T.astype(np.float64) @ sent
@@ -343,8 +353,8 @@ def _solve_matrix_free(ff, nodes, settings, monitor):
     st = res.stats
     incident = st["incident"]
     emitted, absorbed = st["emitted"], st["absorbed"]
-    if nodes.direct is not None:     # shooting counted rho E / pi as emission: count E instead
-        direct = nodes.direct * nodes.areas[:, None]
+    if nodes.arriving is not None:   # shooting counted rho E / pi as emission: count E instead
+        direct = nodes.arriving * nodes.areas[:, None]
         incident = incident + direct
         emitted = emitted - (nodes.rho * direct).sum(axis=0) + direct.sum(axis=0)
         absorbed = absorbed + ((1.0 - nodes.rho) * direct).sum(axis=0)
@@ -354,16 +364,18 @@ def _solve_matrix_free(ff, nodes, settings, monitor):
 
 
 def _direct_power(nodes):
-    """(3,) the lights' direct light arriving at the nodes (radiance x area, before pi)."""
-    if nodes.direct is None:
+    """(3,) the lights' and the world's light arriving at the nodes (radiance x area, before
+    pi)."""
+    if nodes.arriving is None:
         return np.zeros(3)
-    return (nodes.direct * nodes.areas[:, None]).sum(axis=0)
+    return (nodes.arriving * nodes.areas[:, None]).sum(axis=0)
 
 
 @dataclass(frozen=True)
 class Gather:
     """What the final gather keeps for relight: corner groups, their rows, receiver elements,
-    and the direct light of the point, spot and sun lights at the groups (or None)."""
+    and the light from beyond their surfaces at the groups (lights and world,
+    :meth:`core.lights.DirectLight.extra`; or None)."""
 
     groups: object
     rows: RowStore

@@ -312,9 +312,7 @@ def make_scene(vertices, corner_verts, face_starts, face_sizes, face_materials, 
         world.setflags(write=False)
         if not np.any(world > 0):
             world = None
-    has_light = (lights is not None and (np.any(lights.intensity > 0)
-                                         or np.any(lights.sun_irradiance > 0))) \
-        or world is not None
+    has_light = (lights is not None and lights.shines) or world is not None
     if not (emitting_materials[face_materials] & valid).any() and not has_light:
         raise SceneError("the scene has no emitter: no valid face uses a material with emission > 0 "
                          "(add an emissive material, a light or a world colour)")

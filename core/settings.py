@@ -283,8 +283,9 @@ TABLE = (
             "Shadow rays per point, spot or sun light at each output point, where the light has "
             "a size (radius, angle): the softness of its shadows", low=1, high=1024,
             soft=(1, 256), exposed=True,
-            doc="Points whose first 4 rays agree (fully lit or fully shadowed) cast no more: "
-                "only the penumbra pays for the samples (core.lights)."),
+            doc="Points whose first round (8 rays on a ring near the light's rim, 1 to its "
+                "centre) agrees, fully lit or fully shadowed, cast no more: only the penumbra "
+                "pays for the samples; a light narrower than min_element casts 1 (core.lights)."),
     Setting("vertex_budget", "int", 100_000, "Vertex Budget",
             "Radiosity mesh: most output vertices; the worst elements are split first", low=4,
             soft=(1000, 1_000_000), exposed=True,

@@ -108,8 +108,7 @@ def _has_light(arrays):
     if (arrays["emission"][arrays["face_materials"]] > 0).any() or arrays.get("world") is not None:
         return True
     lights = arrays.get("lights")
-    return lights is not None and bool((lights.intensity > 0).any()
-                                       or (lights.sun_irradiance > 0).any())
+    return lights is not None and lights.shines
 
 
 def compute(bake_input, progress=None, cancel=None):

@@ -71,6 +71,34 @@ def read_colours(mesh, name="Radiosity"):
     return buf.reshape(-1, 4)[:, :3].astype(np.float64)
 
 
+def cycles_corners(obj, samples, indirect=False):
+    """Cycles' DIFFUSE bake of *obj*'s corners, (C, 3): direct light x colour, plus the
+    indirect light with ``indirect`` (64 bounces, no clamp). Adaptive sampling is off: it would
+    stop at its own noise threshold."""
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.cycles.samples = samples
+    scene.cycles.use_adaptive_sampling = False
+    if indirect:
+        scene.cycles.max_bounces = scene.cycles.diffuse_bounces = 64
+        scene.cycles.sample_clamp_indirect = 0.0
+    scene.render.bake.use_pass_direct = True
+    scene.render.bake.use_pass_indirect = indirect
+    scene.render.bake.use_pass_color = True
+    mesh = obj.data
+    if "cycles" not in mesh.color_attributes:
+        mesh.color_attributes.new("cycles", "FLOAT_COLOR", "CORNER")
+    mesh.color_attributes.active_color = mesh.color_attributes["cycles"]
+    for other in scene.objects:
+        other.select_set(False)
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    passes = {"DIRECT", "INDIRECT", "COLOR"} if indirect else {"DIRECT", "COLOR"}
+    bpy.ops.object.bake(type="DIFFUSE", pass_filter=passes, target="VERTEX_COLORS")
+    return read_colours(mesh, "cycles")
+
+
 def set_settings(scene, **kw):
     props = scene.radiosity
     for key, value in kw.items():

@@ -30,7 +30,7 @@ import numpy as np
 import pytest
 
 from conftest import PACKAGE
-from helpers import material, mesh_object, read_colours, square
+from helpers import cycles_corners, material, mesh_object, read_colours, square
 
 materials = PACKAGE.radiosity_addon.materials
 
@@ -151,24 +151,7 @@ def _light(kind, location, rotation=(0.0, 0.0, 0.0), visible_diffuse=True, **pro
 
 def _cycles_corners(floor, samples=LIGHT_SAMPLES):
     """Cycles' DIFFUSE bake (direct light x colour) of *floor*'s corners: (C, 3)."""
-    scene = bpy.context.scene
-    scene.render.engine = "CYCLES"
-    scene.cycles.device = "CPU"
-    scene.cycles.samples = samples
-    scene.cycles.use_adaptive_sampling = False     # it would stop at its own noise threshold
-    scene.render.bake.use_pass_direct = True
-    scene.render.bake.use_pass_indirect = False
-    scene.render.bake.use_pass_color = True
-    mesh = floor.data
-    if "cycles" not in mesh.color_attributes:
-        mesh.color_attributes.new("cycles", "FLOAT_COLOR", "CORNER")
-    mesh.color_attributes.active_color = mesh.color_attributes["cycles"]
-    for obj in scene.objects:
-        obj.select_set(False)
-    floor.select_set(True)
-    bpy.context.view_layer.objects.active = floor
-    bpy.ops.object.bake(type="DIFFUSE", pass_filter={"DIRECT", "COLOR"}, target="VERTEX_COLORS")
-    return read_colours(floor.data, "cycles")
+    return cycles_corners(floor, samples)
 
 
 def _our_corners(floor):

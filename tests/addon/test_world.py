@@ -19,7 +19,7 @@ import bpy
 import numpy as np
 import pytest
 
-from helpers import material, mesh_object, read_colours, square
+from helpers import cycles_corners, material, mesh_object, read_colours, square
 
 SAMPLES = 256
 MEAN_RTOL, MAX_RTOL = 0.03, 0.08
@@ -47,30 +47,7 @@ def _grid(name, size, location, rotation=(0.0, 0.0, 0.0), cuts=8):
 
 
 def _cycles(objects):
-    scene = bpy.context.scene
-    scene.render.engine = "CYCLES"
-    scene.cycles.device = "CPU"
-    scene.cycles.samples = SAMPLES
-    scene.cycles.use_adaptive_sampling = False
-    scene.cycles.max_bounces = scene.cycles.diffuse_bounces = 64
-    scene.cycles.sample_clamp_indirect = 0.0
-    scene.render.bake.use_pass_direct = True
-    scene.render.bake.use_pass_indirect = True
-    scene.render.bake.use_pass_color = True
-    out = []
-    for obj in objects:
-        mesh = obj.data
-        if "cycles" not in mesh.color_attributes:
-            mesh.color_attributes.new("cycles", "FLOAT_COLOR", "CORNER")
-        mesh.color_attributes.active_color = mesh.color_attributes["cycles"]
-        for other in scene.objects:
-            other.select_set(False)
-        obj.select_set(True)
-        bpy.context.view_layer.objects.active = obj
-        bpy.ops.object.bake(type="DIFFUSE", pass_filter={"DIRECT", "INDIRECT", "COLOR"},
-                            target="VERTEX_COLORS")
-        out.append(read_colours(mesh, "cycles"))
-    return out
+    return [cycles_corners(obj, SAMPLES, indirect=True) for obj in objects]
 
 
 def _ours(objects):
