@@ -39,7 +39,7 @@ from .criteria import (SHADOW_SAMPLES, EmitterSamples, contact_edges, contact_po
 from .duplicates import copy_duplicate_faces
 from .elements import bake_elements
 from .gather import NORMAL_DECIMALS, corner_groups, shade
-from .geometry import patch_extents
+from .geometry import patch_extents, spatial_order
 from .hemicube import point_rows
 from .hierarchy import ElementTree, output_mesh
 from .progress import SubMonitor
@@ -170,20 +170,6 @@ class FarField:
         out[:, child] = mixed[:, col] * self.weight[child]
         out[:, K + child] = mixed[:, D + col] * self.weight[child]
         return out
-
-
-def _spatial_order(points):
-    """Indices that put ``points`` (n, 3) in Z order (batches of neighbours stay compact)."""
-    if points.shape[0] < 2:
-        return np.arange(points.shape[0])
-    lo = points.min(axis=0)
-    span = max(float(np.max(points.max(axis=0) - lo)), 1e-300)
-    q = np.minimum((points - lo) / span * 1024, 1023).astype(np.int64)
-    code = np.zeros(points.shape[0], dtype=np.int64)
-    for bit in range(10):
-        for axis in range(3):
-            code |= ((q[:, axis] >> bit) & 1) << (3 * bit + axis)
-    return np.argsort(code, kind="stable")
 
 
 def _seen_subset(patches, radiance, power):
@@ -416,7 +402,7 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         group_lit = np.zeros(groups.points.shape[0], dtype=bool)
         np.logical_or.at(group_lit, groups.group[ok], lit[corner_patch[ok]])
         go = new[group_lit[new]]
-        go = go[_spatial_order(groups.points[go])]
+        go = go[spatial_order(groups.points[go])]
         inc = np.zeros((new.size, 3))
         dl = np.zeros((new.size, 3))
         covered = np.ones(new.size)

@@ -23,7 +23,7 @@ import numpy as np
 from .adaptive import coarse_patch_size, mesh_colours
 from .colours import corner_colours
 from .contacts import find_contacts, split_at_contacts
-from .criteria import face_variation, near_emitter_mask, unlit_late_nodes
+from .criteria import cavity_mask, face_variation, near_emitter_mask, unlit_late_nodes
 from .lights import DirectLight
 from .duplicates import duplicate_warning, fill_duplicate_colours, merge_duplicates
 from .orient import orient
@@ -149,10 +149,12 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
 
 
 def _split_near_emitters(scene, patches, min_size, levels):
-    """Solve patches split where they are too large for their distance to an emitter."""
+    """Solve patches split where they are too large for their distance to an emitter, or for
+    the thin cavity they bound."""
     for _ in range(levels):
         emitting = np.any(np.asarray(scene.emission)[patches.material] > 0, axis=1)
-        mask = near_emitter_mask(patches, emitting, min_size=min_size)
+        mask = near_emitter_mask(patches, emitting, min_size=min_size) \
+            | cavity_mask(patches, min_size=min_size)
         if not mask.any():
             break
         patches, _ = subdivide_patches(patches, mask)

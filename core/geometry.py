@@ -319,3 +319,17 @@ def pairs_by_key(keys):
     i = np.repeat(np.arange(ks.size), deg)
     j = np.repeat(first, deg) + (np.arange(deg.sum()) - np.repeat(np.cumsum(deg) - deg, deg))
     return order[i].astype(np.int64), order[j].astype(np.int64)
+
+
+def spatial_order(points):
+    """Indices that put ``points`` (n, 3) in Z order (batches of neighbours stay compact)."""
+    if points.shape[0] < 2:
+        return np.arange(points.shape[0])
+    lo = points.min(axis=0)
+    span = max(float(np.max(points.max(axis=0) - lo)), 1e-300)
+    q = np.minimum((points - lo) / span * 1024, 1023).astype(np.int64)
+    code = np.zeros(points.shape[0], dtype=np.int64)
+    for bit in range(10):
+        for axis in range(3):
+            code |= ((q[:, axis] >> bit) & 1) << (3 * bit + axis)
+    return np.argsort(code, kind="stable")

@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from core import BakeSettings, scene_from_polygons
-from core.criteria import interpolation_errors, per_leaf_scores
+from core.criteria import (STEEP_FLOOR, cavity_mask, interpolation_errors, per_leaf_scores,
+                           smallest_split)
+from core.geometry import patch_extents
 from core.hierarchy import ElementTree
 from core.patches import make_patches
 
@@ -81,3 +83,67 @@ def test_the_rule_follows_the_contrast_setting():
     assert np.all(loose == 0)
     _, tight, _ = scores(bent, contrast=0.02)
     assert np.all(tight > 0)
+
+
+def test_steep_leaves_at_a_contact_split_below_min_element():
+    # Leaves 2 m wide, min_element 1.5 m: no leaf may split (2 x min_element = 3 m) unless it is
+    # steep and touches a contact line, where the limit is 2 min_element sqrt(contrast / diff),
+    # never below STEEP_FLOOR x 2 min_element.
+    tree, conf = split_floor()
+    pts = conf["corner_verts"]
+    C, E = pts.size, tree.n_leaves
+    floor = tree.leaf_face == 0
+    y = np.where(tree.points[pts][:, 0] < 1e-9, 0.1, 1.0)       # 90 % contrast across x
+    settings = BakeSettings(contrast=0.1, min_element=1.5)
+
+    def split(alone):
+        s, _ = per_leaf_scores(tree, conf, y, np.zeros(C, np.int64), alone, np.zeros(E, bool),
+                               1e-9, settings)
+        return s[floor] > 0
+
+    steep = np.repeat(floor[conf["face_leaf"]], conf["face_sizes"])
+    assert not split(np.zeros(C, bool)).any()
+    assert split(steep).sum() == 2            # the two leaves along x = 0
+    limit = smallest_split(np.array([0.9, 0.1, 100.0]), settings)
+    np.testing.assert_allclose(limit, [3.0 / 3.0, 3.0, 3.0 * STEEP_FLOOR])
+
+
+def board_over_floor(gap, board_width, board_len=2.0):
+    """A 4 m floor and a board of ``board_width`` x ``board_len`` facing it ``gap`` above."""
+    w, l = board_width, board_len
+    verts = np.array([[0, 0, 0], [4, 0, 0], [4, 4, 0], [0, 4, 0],
+                      [1, 1, gap], [1, 1 + w, gap], [1 + l, 1 + w, gap], [1 + l, 1, gap],
+                      [0, 0, 3], [0, 0.1, 3], [0.1, 0.1, 3], [0.1, 0, 3]], float)
+    return scene_from_polygons(verts, [[0, 1, 2, 3], [4, 5, 6, 7], [8, 9, 10, 11]], [0, 0, 1],
+                               [[0.5] * 3, [0.0] * 3], [[0.0] * 3, [1.0] * 3])
+
+
+def test_a_thin_cavity_splits_both_sides_down_to_its_gap():
+    scene = board_over_floor(0.1, 0.5)
+    patches = make_patches(scene, 1.0)
+    mask = cavity_mask(patches)
+    board, floor = patches.face == 1, patches.face == 0
+    assert mask[board].all()                  # 1 m > 2 x 0.1 m
+    # The floor under the board; the gap is bounded below by the patches' bounding spheres, so
+    # its 1 m neighbours are marked too (their children are measured again the next round).
+    c = patches.centres
+    under = floor & (c[:, 0] > 1) & (c[:, 0] < 3) & (c[:, 1] > 1) & (c[:, 1] < 1.5 + 1e-9)
+    near = floor & (c[:, 0] > 0) & (c[:, 0] < 4) & (c[:, 1] < 3)
+    assert under.sum() == 2 and mask[under].all()
+    assert not mask[floor & ~near].any()
+    # One round later the floor patches far from the board's edge are no longer marked.
+    again = make_patches(scene, 0.25)
+    m2, c2 = cavity_mask(again), again.centres
+    far = (again.face == 0) & ((c2[:, 1] > 2.2) | (c2[:, 0] > 3.7))
+    assert m2[(again.face == 0) & (np.abs(c2[:, 0] - 2) < 0.5) & (np.abs(c2[:, 1] - 1.25) < 0.2)].all()
+    assert not m2[far].any()
+    assert not mask[patches.face == 2].any()  # the emitter faces the floor 3 m away
+    # The same board 1 m up: no patch is wider than twice the gap.
+    assert not cavity_mask(make_patches(board_over_floor(1.0, 0.5), 1.0)).any()
+    # A strip narrower than the gap (an edge 2 cm wide, 5 cm up) forms no cavity.
+    strip = make_patches(board_over_floor(0.05, 0.02), 1.0)
+    assert not cavity_mask(strip).any()
+    # In contact (gap 0), nothing: faces pressed together enclose no light.
+    assert not cavity_mask(make_patches(board_over_floor(0.0, 0.5), 1.0)).any()
+    # Never below min_size.
+    assert not cavity_mask(patches, min_size=2.0).any()
