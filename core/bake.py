@@ -128,7 +128,7 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     scene = merge_duplicates(scene)      # stability (issue 11): coincident faces solved as one
     patches = make_patches(scene, settings.patch_size)
     if settings.output_mode == "mesh":
-        patches = _split_near_emitters(scene, patches, settings.min_element,
+        patches = _split_near(scene, patches, settings.min_element,
                                        settings.emitter_levels)
     contacts = on_contact = found = None
     if settings.contact_cuts:
@@ -148,7 +148,7 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     return result
 
 
-def _split_near_emitters(scene, patches, min_size, levels):
+def _split_near(scene, patches, min_size, levels):
     """Solve patches split where they are too large for their distance to an emitter, or for
     the thin cavity they bound."""
     for _ in range(levels):

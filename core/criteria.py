@@ -25,11 +25,12 @@ SHADOW_SAMPLES = 16
 #: 1,118 -> 1,101 vertices at 1.35 -> 1.36 %.
 SHADOW_CONTRAST = 1.0
 
-#: Leaves steeper than ``contrast`` may be split below ``2 min_element``, down to this fraction of
-#: it (:func:`smallest_split`). Measured (bench/compare/coarse.py, Cornell box modelled
-#: coarsely): the strip between the short block's foot and its shadow's edge, 7 cm wide, was one
-#: element at min_element 0.05 m (+200 % on the worst face); with this rule 10.0 % -> 3.8 % RMS,
-#: 949 -> 1,464 vertices.
+#: Leaves along a contact line steeper than ``contrast`` may be split below ``2 min_element``,
+#: down to this fraction of it (:func:`smallest_split`). Measured (bench/compare/coarse.py,
+#: Cornell box modelled coarsely): the strip between the short block's foot and its shadow's
+#: edge, 7 cm wide, was one element at min_element 0.05 m (+200 % on the worst face); with this
+#: rule 10.0 % -> 4.8 % RMS, 949 -> 1,072 vertices (on every steep leaf, not only at contacts:
+#: 3.8 % with 1,464, but the office +70 % vertices for 0.2 points).
 STEEP_FLOOR = 0.25
 
 #: Leaves along a contact line are split down to this size (m) (or min_element if larger).
@@ -60,9 +61,9 @@ COPLANAR = 1e-3
 #: (area / longest edge) as the gap (a strip narrower than the gap forms no cavity; faces
 #: in contact form none). The light in a cavity bounces between its two sides and fades with
 #: depth; a patch wider than the gap carries one mean over the whole depth, which a point deep
-#: inside then sees. Measured on the office
-#: modelled coarsely (bench/compare/coarse.py): the floor under the lowest shelf (10 cm slot)
-#: was +130 % against converged Cycles at 1 m and at 0.25 m patches, +24 % at 0.2 m.
+#: inside then sees. Measured on the office modelled coarsely (bench/compare/coarse.py): the
+#: floor under the lowest shelf (10 cm slot) was +130 % against converged Cycles at 1 m and at
+#: 0.25 m patches, +24 % at 0.2 m; with this split 10.0 % -> 6.1 % RMS over the whole office.
 CAVITY_FACTOR = 2.0
 CAVITY_COS = -0.7
 
@@ -311,7 +312,8 @@ def per_leaf_scores(tree, conf, corner_y, corner_vis, corner_alone, emitting_lea
     contact = touches & (size > max(CONTACT_ELEMENT, 2.0 * settings.min_element))
     score = np.maximum(score, np.where(contact, 0.5 * area, 0.0))
     score[emitting_leaf] = 0.0
-    score[size < np.where(touches, smallest_split(diff, settings), 2.0 * settings.min_element)] = 0.0
+    limit = np.where(touches, smallest_split(diff, settings), 2.0 * settings.min_element)
+    score[size < limit] = 0.0
     return score, dict(contrast=int(np.count_nonzero(steep > settings.contrast)),
                        shadow=int(np.count_nonzero(shadow)), contact=int(np.count_nonzero(contact)))
 
@@ -319,14 +321,30 @@ def per_leaf_scores(tree, conf, corner_y, corner_vis, corner_alone, emitting_lea
 def smallest_split(diff, settings):
     """(E,) float: the smallest leaf size (m) that may still be split, per leaf contrast ``diff``.
 
-    ``2 min_element`` where the contrast is at most ``contrast``; where it is steeper (a shadow
-    edge, the foot of an object) down to ``2 min_element sqrt(contrast / diff)``, never below
+    ``2 min_element`` where the contrast is at most ``contrast``; where it is steeper (the
+    foot of an object: :func:`per_leaf_scores` applies it to leaves along a contact line)
+    down to ``2 min_element sqrt(contrast / diff)``, never below
     ``STEEP_FLOOR x 2 min_element``: linear interpolation across a leaf errs by about a quarter
     of its contrast at its middle, so a leaf ten times over the threshold is worth halving once
     or twice more, and the floor bounds what a hard shadow edge costs.
     """
     ratio = settings.contrast / np.maximum(diff, 1e-300)
     return 2.0 * settings.min_element * np.clip(np.sqrt(ratio), STEEP_FLOOR, 1.0)
+
+
+def _pair_gaps(centres, radius, normals, a, b):
+    """Lower bounds of the gaps between patches ``a`` (rows) and ``b`` (columns).
+
+    The gap is at least the distance between their bounding spheres and the distance of each
+    centre from the other's plane. Returns ``(d, gap, plane_a, plane_b)``: ``d`` (A, B, 3) the
+    vectors from a's centres to b's, ``plane_a`` b's centres from a's planes, ``plane_b`` a's
+    from b's.
+    """
+    d = centres[None, b, :] - centres[a, None, :]
+    sphere = np.linalg.norm(d, axis=2) - radius[None, b] - radius[a, None]
+    plane_a = np.abs(np.einsum("abk,ak->ab", d, normals[a]))
+    plane_b = np.abs(np.einsum("abk,bk->ab", d, normals[b]))
+    return d, np.maximum(sphere, np.maximum(plane_a, plane_b)), plane_a, plane_b
 
 
 def near_emitter_mask(patches, emitting, *, factor=NEAR_EMITTER_FACTOR, min_size=0.0):
@@ -361,11 +379,7 @@ def near_emitter_mask(patches, emitting, *, factor=NEAR_EMITTER_FACTOR, min_size
     step = max(1, NEAR_CHUNK // P)
     for lo in range(0, src.size, step):
         e = src[lo:lo + step]
-        d = centres[None, :, :] - centres[e, None, :]                     # (E, P, 3)
-        sphere = np.linalg.norm(d, axis=2) - radius[None, :] - radius[e, None]
-        plane_e = np.abs(np.einsum("epk,ek->ep", d, normals[e]))          # p from e's plane
-        plane_p = np.abs(np.einsum("epk,pk->ep", d, normals))             # e from p's plane
-        gap = np.maximum(sphere, np.maximum(plane_e, plane_p))
+        _, gap, plane_e, plane_p = _pair_gaps(centres, radius, normals, e, slice(None))
         # Coplanar patches exchange nothing (a ceiling around a flush panel); emitters are
         # measured against the surfaces around them, not against each other.
         flat = (plane_e <= COPLANAR * radius[e, None]) & (plane_p <= COPLANAR * radius[None, :])
@@ -375,7 +389,6 @@ def near_emitter_mask(patches, emitting, *, factor=NEAR_EMITTER_FACTOR, min_size
         mask |= np.any(size[None, :] > near, axis=0)
         mask[e] |= np.any((size[e, None] > near) & ~emitting[None, :], axis=1)
     return mask & (size > min_size)
-
 
 
 def cavity_mask(patches, *, factor=CAVITY_FACTOR, min_size=0.0):
@@ -412,15 +425,11 @@ def cavity_mask(patches, *, factor=CAVITY_FACTOR, min_size=0.0):
         reach = radius[p].max() + radius.max() + size[p].max() / factor
         box_lo, box_hi = centres[p].min(axis=0) - reach, centres[p].max(axis=0) + reach
         q = np.flatnonzero(np.all((centres >= box_lo) & (centres <= box_hi), axis=1))
-        d = centres[None, q, :] - centres[p, None, :]                     # (p, q, 3): p -> q
+        d, gap, plane_p, plane_q = _pair_gaps(centres, radius, normals, p, q)
         facing = (normals[p] @ normals[q].T) < CAVITY_COS
         front = (np.einsum("pqk,pk->pq", d, normals[p]) > 0) \
             & (np.einsum("pqk,qk->pq", d, normals[q]) < 0)
-        sphere = np.linalg.norm(d, axis=2) - radius[None, q] - radius[p, None]
-        plane_p = np.abs(np.einsum("pqk,pk->pq", d, normals[p]))
-        plane_q = np.abs(np.einsum("pqk,qk->pq", d, normals[q]))
         apart = (plane_p > COPLANAR * radius[p, None]) & (plane_q > COPLANAR * radius[None, q])
-        gap = np.maximum(sphere, np.maximum(plane_p, plane_q))
         cavity = facing & front & apart & (width[None, q] >= gap) & (width[p, None] >= gap)
         mask[p] = np.any(cavity & (size[p, None] > factor * gap), axis=1)
     return mask
