@@ -6,7 +6,7 @@ are re-exported here; see README.md for a runnable example and docs/design.md fo
 
 from .bake import BakeResult, bake, form_factor_matrix, relight
 from .errors import BakeCancelled, RadiosityError, SceneError, SettingsError
-from .lights import Lights, make_lights
+from .light_list import Lights, make_lights
 from .outmesh import OutputMesh
 from .photometry import Photometry, read_photometry
 from .scene import Scene, make_scene, scene_from_polygons

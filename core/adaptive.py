@@ -412,8 +412,12 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         for s in range(0, go.size, GATHER_BATCH):
             g = go[s:s + GATHER_BATCH]
             kw = dict(resolution=settings.resolution, rotate=settings.rotate_hemicube, rng=rng)
-            rows = point_rows(seen, groups.points[g], groups.normals[g], **kw) \
-                if far_field is None else far_field.rows(groups.points[g], groups.normals[g], **kw)
+            if not seen.areas.size:     # nothing lit to see (exact emitters light a black room)
+                rows = np.zeros((g.size, 0), dtype=np.float32)
+            elif far_field is None:
+                rows = point_rows(seen, groups.points[g], groups.normals[g], **kw)
+            else:
+                rows = far_field.rows(groups.points[g], groups.normals[g], **kw)
             cols, vals = compact_rows(rows)
             inc[pos_in_new[s:s + GATHER_BATCH]] = vals.astype(np.float64) @ seen_L[cols]
             covered[pos_in_new[s:s + GATHER_BATCH]] = rows.sum(axis=1)

@@ -24,6 +24,7 @@ from .adaptive import coarse_patch_size, mesh_colours
 from .colours import corner_colours
 from .contacts import find_contacts, split_at_contacts
 from .criteria import cavity_mask, face_variation, near_emitter_mask, unlit_late_nodes
+from .emitters import Emitters, exact_materials
 from .lights import DirectLight
 from .duplicates import duplicate_warning, fill_duplicate_colours, merge_duplicates
 from .orient import orient
@@ -206,8 +207,9 @@ def relight(result, *, reflectance=None, emission=None, progress=None, cancel=No
     """Re-solve a bake with new material reflectance and/or emission, reusing its form factors.
 
     Nodes that become emitters but were never reached get their rows computed (only those
-    rows). A matrix-free (progressive) bake kept no form factors: it is recomputed from scratch
-    and the report says so.
+    rows). A new emission with exact emitters (``exact_direct``, core.emitters) casts their
+    shadow rays and gathers again. A matrix-free (progressive) bake kept no form factors: it is
+    recomputed from scratch and the report says so.
 
     Parameters
     ----------
@@ -251,6 +253,13 @@ def relight(result, *, reflectance=None, emission=None, progress=None, cancel=No
         raise ValueError("emission leaves no emitting patch: nothing to light the scene")
     monitor = Monitor(progress, cancel)
     t_start = time.perf_counter()
+    st = state.settings
+    if "emission" in changes and (
+            (state.direct is not None and state.direct.emitters is not None)
+            or exact_materials(new_scene, st.exact_direct, st.resolution).any()):
+        # The exact emitters' light is kept summed at every point: it is cast again, and the
+        # gathers that hold it are made again (the form factors are kept).
+        state = dataclasses.replace(state, direct=None, gather=None)
     if state.store is None:     # a matrix-free bake kept no form factors
         monitor.stage(*_STAGES["patches"])
         monitor.update(1.0, "patches")
@@ -275,9 +284,14 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     timings = dict(timings)
     t0 = time.perf_counter()
     direct = kept.direct if kept is not None else None
-    if direct is None and (scene.lights is not None or scene.world is not None):
-        direct = DirectLight(scene.lights, patches, settings.light_samples, scene.world,
-                             min_size=settings.min_element)
+    if direct is None:
+        emitters = None
+        chosen = exact_materials(scene, settings.exact_direct, settings.resolution)
+        if chosen.any():                              # stability (issue 11): small lamps
+            emitters = Emitters(scene, patches, chosen)
+        if scene.lights is not None or scene.world is not None or emitters is not None:
+            direct = DirectLight(scene.lights, patches, settings.light_samples, scene.world,
+                                 min_size=settings.min_element, emitters=emitters)
     nodes = node_arrays(scene, patches, settings.two_sided, direct)
     if direct is not None:
         timings["lights"] = time.perf_counter() - t0
@@ -318,7 +332,8 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
                                        incident=sol.incident - nodes.sky * nodes.areas[:, None])
     side = orient(scene, patches, oriented.incident, settings.two_sided,
                   kept.flipped if kept is not None else None, ff.store.row_sums)
-    room_side = side.room_side(sol.node_radiance)
+    shown = nodes.shown(sol.node_radiance)       # the transported radiance + exact emission
+    room_side = side.room_side(shown)
     gather = kept.gather if kept is not None else None
     mesh = mesh_report = None
     if settings.output_mode == "mesh":
@@ -336,7 +351,7 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
                                          gather)
     else:
         corner, element_report = colours(side.scene, side.patches,
-                                         np.concatenate([room_side, sol.node_radiance[P:]]),
+                                         np.concatenate([room_side, shown[P:]]),
                                          settings, gather)
     corner = fill_duplicate_colours(scene, corner)       # stability (issue 11)
     timings["colours"] = time.perf_counter() - t0
@@ -372,9 +387,11 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
         report["face_variation"] = face_variation(scene, patches, patch_radiance,
                                                   settings.contrast)
     if direct is not None and len(direct):
-        report["lights"] = dict(count=len(direct), names=list(scene.lights.names),
+        n_lights = len(direct.lights)
+        report["lights"] = dict(count=n_lights, names=list(direct.lights.names),
                                 shadow_rays=int(direct.rays))
+        if direct.emitters is not None:
+            report["lights"]["exact_emitter_faces"] = int(direct.emitters.faces.size)
     state = _State(scene, settings, patches, sol.store, ff.active, gather, on_contact,
                    contact_lines, side.flipped, direct)
-    return BakeResult(corner, patch_radiance, sol.node_radiance, patches, report, state,
-                      output=mesh)
+    return BakeResult(corner, patch_radiance, shown, patches, report, state, output=mesh)

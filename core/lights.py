@@ -40,16 +40,12 @@ rest cast ``samples`` more. Deterministic: the sample pattern is a
 fixed spiral, turned per point by a hash of the point's position.
 """
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from .errors import SceneError
 from .exact import bilinear, gauss_square, ray_triangles
-from .photometry import CYCLES_CANDELA_TO_WATT, Photometry
+from .light_list import make_lights
 from .raycast import any_hit, build_bvh
 
-KINDS = ("point", "spot", "sun")
 
 #: Shadow rays per light and point in the first round, on a ring at RIM x the light's radius (and
 #: one to its centre); a point whose first-round rays all agree (lit, or shadowed) casts no
@@ -80,256 +76,6 @@ LUMA = np.array([0.2126, 0.7152, 0.0722])
 #: A light's centre-visibility bit per light, in the bits above the emitter samples' bits
 #: (core.criteria): lights beyond this many share bits (modulo).
 VISIBILITY_BITS = 40
-
-
-@dataclass(frozen=True, eq=False)
-class Lights:
-    """Point, spot and sun lights as arrays (build with :func:`make_lights`).
-
-    Attributes
-    ----------
-    names : tuple of str
-        Every light, point and spot lights first, then suns.
-    position : (n, 3) float64
-        Point and spot lights.
-    intensity : (n, 3) float64
-        Radiant intensity (W/sr), RGB.
-    radius : (n,) float64
-    soft : (n,) bool
-        Soft falloff: ``d^2 + r^2`` in the denominator.
-    axis : (n, 3) float64
-        Spot direction (unit); zero for point lights.
-    cos_half : (n,) float64
-        Cosine of the half cone angle; -1 for point lights.
-    smooth : (n,) float64
-        Width of the cone's soft edge in cosine: ``(1 - cos_half) x blend``.
-    shadow : (n + m,) bool
-        The light casts shadows.
-    sun_direction : (m, 3) float64
-        Unit vector towards each sun.
-    sun_irradiance : (m, 3) float64
-        W/m^2 on a surface facing the sun, RGB.
-    sun_half_angle : (m,) float64
-        Half the sun's angular diameter (rad).
-    profiles : tuple
-        Per point and spot light, its :class:`LightProfile` (a measured distribution) or None;
-        empty when no light has one.
-    """
-
-    names: tuple
-    position: np.ndarray
-    intensity: np.ndarray
-    radius: np.ndarray
-    soft: np.ndarray
-    axis: np.ndarray
-    cos_half: np.ndarray
-    smooth: np.ndarray
-    shadow: np.ndarray
-    sun_direction: np.ndarray
-    sun_irradiance: np.ndarray
-    sun_half_angle: np.ndarray
-    profiles: tuple = ()
-
-    @property
-    def n_points(self):
-        return int(self.position.shape[0])
-
-    @property
-    def n_suns(self):
-        return int(self.sun_direction.shape[0])
-
-    def __len__(self):
-        return self.n_points + self.n_suns
-
-    def scaled(self, factor):
-        """The same lights with every length times ``factor`` (intensity x factor^2: the
-        irradiance at the scaled distances is unchanged)."""
-        return Lights(self.names, self.position * factor, self.intensity * factor ** 2,
-                      self.radius * factor, self.soft, self.axis, self.cos_half, self.smooth,
-                      self.shadow, self.sun_direction, self.sun_irradiance, self.sun_half_angle,
-                      self.profiles)
-
-    @property
-    def shines(self):
-        """Whether any light gives light (power or strength > 0)."""
-        return bool(np.any(self.intensity > 0) or np.any(self.sun_irradiance > 0))
-
-
-def _vec(light, key, label, default=None, length=3):
-    value = light.get(key, default)
-    if value is None:
-        raise SceneError(f"{label}: missing '{key}'")
-    try:
-        arr = np.array(value, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        raise SceneError(f"{label}: '{key}' must be numbers; got {value!r}") from None
-    if arr.size != length or not np.all(np.isfinite(arr)):
-        raise SceneError(f"{label}: '{key}' must be {length} finite number(s); got {value!r}")
-    return arr if length > 1 else float(arr[0])
-
-
-def _direction(light, label, key="direction", default=None):
-    d = _vec(light, key, label, default)
-    n = np.linalg.norm(d)
-    if n == 0:
-        raise SceneError(f"{label}: {key} must be non-zero")
-    return d / n
-
-
-#: What a light's power means with a measured distribution (core.photometry): see the module
-#: docstring.
-PHOTOMETRY_SCALES = ("power", "cycles")
-
-
-@dataclass(frozen=True, eq=False)
-class LightProfile:
-    """A measured distribution placed on a light: ``f(dir) = gain x candela(gamma, C)``.
-
-    Attributes
-    ----------
-    photometry : core.photometry.Photometry
-    nadir, c0, c90 : (3,) float64
-        Unit vectors: gamma 0, and C = 0 and C = 90 degrees at gamma 90 (``c90 = nadir x c0``).
-    gain : float
-        Per candela: 1 / mean candela ('power') or 4 pi / 177.83 ('cycles').
-    """
-
-    photometry: Photometry
-    nadir: np.ndarray
-    c0: np.ndarray
-    c90: np.ndarray
-    gain: float
-
-    def factor(self, directions):
-        """(n,) ``f`` along unit ``directions`` (n, 3) leaving the light (vectorised)."""
-        d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
-        gamma = np.arccos(np.clip(d @ self.nadir, -1.0, 1.0))
-        c = np.arctan2(d @ self.c90, d @ self.c0)
-        return self.gain * self.photometry.intensity(gamma, c)
-
-
-def _profile(light, label):
-    """The :class:`LightProfile` of a point or spot light dict, or None."""
-    phot = light.get("photometry")
-    if phot is None:
-        return None
-    if not isinstance(phot, Photometry):
-        raise SceneError(f"{label}: photometry must be a core.photometry.Photometry (read_ies, "
-                         f"read_ldt); got {type(phot).__name__}")
-    scale = light.get("photometry_scale", "power")
-    if scale not in PHOTOMETRY_SCALES:
-        raise SceneError(f"{label}: photometry_scale must be one of {PHOTOMETRY_SCALES}; got "
-                         f"{scale!r}")
-    nadir = _direction(light, label, default=(0.0, 0.0, -1.0))
-    c0 = _direction(light, label, "c0", (0.0, -1.0, 0.0))
-    c0 = c0 - (c0 @ nadir) * nadir
-    n = np.linalg.norm(c0)
-    if n < 1e-6:
-        raise SceneError(f"{label}: c0 (C = 0 of the photometry; default (0, -1, 0)) must not be "
-                         f"parallel to direction; got {light.get('c0', (0.0, -1.0, 0.0))!r}")
-    c0 = c0 / n
-    if scale == "power":
-        flux = phot.flux()
-        if not flux > 0:
-            raise SceneError(f"{label}: the photometry of {phot.name} emits no light (flux "
-                             f"{flux:g} lm)")
-        gain = 4.0 * np.pi / flux
-    else:
-        gain = CYCLES_CANDELA_TO_WATT
-    return LightProfile(phot, nadir, c0, np.cross(nadir, c0), float(gain))
-
-
-def make_lights(lights):
-    """Validate lights given in Blender's terms and convert them to :class:`Lights`.
-
-    Parameters
-    ----------
-    lights : sequence of dict
-        Each has ``kind`` ('point', 'spot' or 'sun'), ``name`` (for messages), ``color`` (RGB,
-        default white) and:
-
-        * point, spot: ``position`` (m), ``power`` (W), ``radius`` (m, default 0),
-          ``soft_falloff`` (default True);
-        * spot: also ``direction`` (the way it points), ``spot_size`` (full cone angle, rad, in
-          (0, pi]) and ``spot_blend`` (in [0, 1]);
-        * sun: ``direction`` (the way the light travels, Blender's -Z of the sun object),
-          ``strength`` (W/m^2) and ``angle`` (angular diameter, rad, default 0);
-        * any: ``shadow`` (casts shadows, default True);
-        * point, spot, optional: ``photometry`` (a :class:`core.photometry.Photometry`),
-          ``photometry_scale`` (one of :data:`PHOTOMETRY_SCALES`, default 'power'),
-          ``direction`` (the nadir, the light's -Z; a spot's own direction; default
-          (0, 0, -1)) and ``c0`` (C = 0, the light's -Y; default (0, -1, 0); made perpendicular
-          to ``direction``): see the module docstring.
-
-    Returns
-    -------
-    Lights
-
-    Raises
-    ------
-    SceneError
-        Naming the light and the field at fault.
-    """
-    points, suns = [], []
-    for i, light in enumerate(lights):
-        if not isinstance(light, dict):
-            raise SceneError(f"light {i} must be a dict; got {type(light).__name__}")
-        name = str(light.get("name", f"light {i}"))
-        label = f'light "{name}"'
-        kind = light.get("kind")
-        if kind not in KINDS:
-            raise SceneError(f"{label}: kind must be one of {KINDS}; got {kind!r}")
-        color = _vec(light, "color", label, (1.0, 1.0, 1.0))
-        if np.any(color < 0):
-            raise SceneError(f"{label}: color must be >= 0; got {color.tolist()}")
-        shadow = bool(light.get("shadow", True))
-        if kind == "sun":
-            if light.get("photometry") is not None:
-                raise SceneError(f"{label}: photometry is for point and spot lights; got a sun")
-            direction = _direction(light, label)
-            strength = _vec(light, "strength", label, length=1)
-            angle = _vec(light, "angle", label, 0.0, length=1)
-            if strength < 0:
-                raise SceneError(f"{label}: strength must be >= 0 W/m^2; got {strength}")
-            if not 0 <= angle < np.pi:
-                raise SceneError(f"{label}: angle must lie in [0, pi) rad; got {angle}")
-            suns.append((name, -direction, strength * color, angle / 2, shadow))
-            continue
-        pos = _vec(light, "position", label)
-        power = _vec(light, "power", label, length=1)
-        radius = _vec(light, "radius", label, 0.0, length=1)
-        if power < 0:
-            raise SceneError(f"{label}: power must be >= 0 W; got {power}")
-        if radius < 0:
-            raise SceneError(f"{label}: radius must be >= 0 m; got {radius}")
-        axis, cos_half, smooth = np.zeros(3), -1.0, 0.0
-        if kind == "spot":
-            axis = _direction(light, label)
-            size = _vec(light, "spot_size", label, length=1)
-            blend = _vec(light, "spot_blend", label, 0.0, length=1)
-            if not 0 < size <= np.pi:
-                raise SceneError(f"{label}: spot_size must lie in (0, pi] rad; got {size}")
-            if not 0 <= blend <= 1:
-                raise SceneError(f"{label}: spot_blend must lie in [0, 1]; got {blend}")
-            cos_half = float(np.cos(size / 2))
-            smooth = (1.0 - cos_half) * blend
-        points.append((name, pos, power * color / (4 * np.pi), radius,
-                       bool(light.get("soft_falloff", True)), axis, cos_half, smooth, shadow,
-                       _profile(light, label)))
-
-    def col(rows, k, shape):
-        return np.array([r[k] for r in rows], dtype=np.float64).reshape(shape)
-
-    n, m = len(points), len(suns)
-    return Lights(
-        names=tuple(p[0] for p in points) + tuple(s[0] for s in suns),
-        position=col(points, 1, (n, 3)), intensity=col(points, 2, (n, 3)),
-        radius=col(points, 3, (n,)), soft=np.array([p[4] for p in points], dtype=bool),
-        axis=col(points, 5, (n, 3)), cos_half=col(points, 6, (n,)), smooth=col(points, 7, (n,)),
-        shadow=np.array([p[8] for p in points] + [s[4] for s in suns], dtype=bool),
-        sun_direction=col(suns, 1, (m, 3)), sun_irradiance=col(suns, 2, (m, 3)),
-        sun_half_angle=col(suns, 3, (m,)),
-        profiles=tuple(p[9] for p in points) if any(p[9] is not None for p in points) else ())
 
 
 def spot_factor(cos_angle, cos_half, smooth):
@@ -365,11 +111,12 @@ def _turn(points):
 
 
 class DirectLight:
-    """Direct light of a scene's :class:`Lights` at points, with shadow rays.
+    """Direct light of a scene's lights (:class:`core.light_list.Lights`) and exact emitters
+    (:class:`core.emitters.Emitters`) at points, with shadow rays.
 
     Parameters
     ----------
-    lights : Lights or None
+    lights : core.light_list.Lights or None
     patches : core.patches.Patches
         What casts shadows (every patch; emitters included).
     samples : int
@@ -381,11 +128,20 @@ class DirectLight:
         The smallest element the output can show (m). A light whose penumbrae are narrower
         (a point or spot light of radius below it, a sun whose angle's tangent times the scene's
         extent is below it) casts one shadow ray per point, to its centre: its shadows are hard,
-        which no element could tell from soft.
+        which no element could tell from soft. Likewise an emitter narrower than it.
+    emitters : core.emitters.Emitters or None
+        Emissive faces lit exactly: lights ``len(lights)`` on, after the point, spot and sun
+        lights.
     """
 
-    def __init__(self, lights, patches, samples=16, world=None, min_size=0.0):
+    def __init__(self, lights, patches, samples=16, world=None, min_size=0.0, emitters=None):
         self.lights = lights if lights is not None else make_lights([])
+        self.emitters = emitters if emitters is not None and len(emitters) else None
+        n_e = 0 if self.emitters is None else len(self.emitters)
+        lt = self.lights
+        self._colours = np.concatenate([lt.intensity, lt.sun_irradiance,
+                                        np.zeros((0, 3)) if n_e == 0 else
+                                        self.emitters.colour]).reshape(-1, 3)
         self.world = None if world is None else np.asarray(world, dtype=np.float64)
         self.samples = int(samples)
         tris = ray_triangles(patches)[0]
@@ -399,7 +155,7 @@ class DirectLight:
         self._patch_cache = None
 
     def __len__(self):
-        return len(self.lights)
+        return len(self.lights) + (0 if self.emitters is None else len(self.emitters))
 
     def incident(self, points, normals, *, samples=None, bits=False):
         """Irradiance / pi at ``points`` facing ``normals`` (n, 3): the radiance-equivalent that
@@ -426,8 +182,7 @@ class DirectLight:
         return (inc, vis) if bits else inc
 
     def _colour(self, j):
-        lt = self.lights
-        return lt.intensity[j] if j < lt.n_points else lt.sun_irradiance[j - lt.n_points]
+        return self._colours[j]
 
     def _unshadowed(self, j, origin, normals):
         """Light j at the points before shadows: (bare, scale, ldir, dist, size), see
@@ -484,11 +239,24 @@ class DirectLight:
         origin = points + self.offset * normals
         turn = _turn(points / self.extent)          # the same pattern at any scale
         unshadowed = [self._unshadowed(j, origin, normals) for j in range(len(lt))]
+        if self.emitters is not None:
+            em = self.emitters
+            unshadowed += [(f, f.copy(), None, None, size)
+                           for f, size in zip(em.unshadowed(origin, normals), em.size)]
         culled = self._culled(unshadowed)
         for j, (bare, scale, ldir, dist, size) in enumerate(unshadowed):
             centre = scale > 0
             go = np.flatnonzero(centre & ~culled[:, j])
             self.culled += int(np.count_nonzero(centre & culled[:, j]))
+            if j >= len(lt):                        # an exact emitter (core.emitters)
+                if go.size:
+                    rays = k if size >= self.min_size else 1
+                    frac, clear = self.emitters.visible(j - len(lt), origin[go], normals[go],
+                                                        rays, turn[go], self._blocked)
+                    scale[go] *= frac
+                    centre[go] = clear
+                yield j, bare, scale, centre
+                continue
             if go.size and lt.shadow[j] and np.any(self._colour(j) > 0):
                 penumbra = size if dist is not None else size * self.extent
                 rays = k if size > 0 and penumbra >= self.min_size else 1
@@ -536,6 +304,11 @@ class DirectLight:
             frac[mixed] = visible(mixed, _spiral(k)).mean(axis=1)
         return frac, centre
 
+    def _blocked(self, origin, direction):
+        """Shadow rays from ``origin`` ending at ``origin + direction`` (n, 3)."""
+        self.rays += origin.shape[0]
+        return any_hit(self.bvh, origin, direction, t_max=1.0 - 1e-9)
+
     def _shadowed(self, origin, ldir, dist, offset):
         """Shadow rays from ``origin`` towards the light's centre moved by ``offset`` (in the
         light's disk for a point light; a direction change for a sun)."""
@@ -545,19 +318,19 @@ class DirectLight:
         d = ldir * dist[:, None] + offset
         return any_hit(self.bvh, origin, d, t_max=1.0 - 1e-9)
 
-    def patch_incident(self, patches, two_sided=True):
+    def patch_incident(self, patches, two_sided=True, *, emitters_only=False):
         """(2P, 3): mean irradiance / pi over every patch, front nodes then back nodes.
 
         ``PATCH_ORDER`` x ``PATCH_ORDER`` Gauss points per patch (weighted by the bilinear map's
         area element), ``PATCH_SAMPLES`` shadow rays per light at each. Kept for the last
-        ``patches`` asked (a relight asks again).
+        ``patches`` asked (a relight asks again). ``emitters_only``: the exact emitters' share
+        alone.
         """
         cached = self._patch_cache
-        if cached is not None and cached[0] is patches and cached[1] == two_sided:
-            return cached[2]
-        out = self._patch_incident(patches, two_sided)
-        self._patch_cache = (patches, two_sided, out)
-        return out
+        if cached is None or cached[0] is not patches or cached[1] != two_sided:
+            cached = (patches, two_sided) + self._patch_incident(patches, two_sided)
+            self._patch_cache = cached
+        return cached[3] if emitters_only else cached[2]
 
     def _patch_incident(self, patches, two_sided):
         P = patches.areas.size
@@ -570,6 +343,7 @@ class DirectLight:
         nrm = np.repeat(patches.normals, R, axis=0)
         flat = pts.reshape(-1, 3)
         out = np.zeros((2 * P, 3))
+        from_emitters = np.zeros((2 * P, 3))
         sides = [(0, 1.0)] + ([(P, -1.0)] if two_sided else [])
         for start, sign in sides:
             for j, bare, scale, _ in self._per_light(flat, sign * nrm, PATCH_SAMPLES):
@@ -583,7 +357,9 @@ class DirectLight:
                     scale = np.where(bare > 0, np.maximum(exact, 0.0) * scale
                                      / np.maximum(bare, 1e-300), scale)
                 out[start:start + P] += scale[:, None] * self._colour(j)[None, :]
-        return out / np.pi
+                if j >= len(self.lights):
+                    from_emitters[start:start + P] += scale[:, None] * self._colour(j)[None, :]
+        return out / np.pi, from_emitters / np.pi
 
 
 def _solid_angle(corners, p):

@@ -70,6 +70,12 @@ class Nodes:
         (:meth:`core.lights.DirectLight.patch_incident`); None: no such lights.
     sky : (2P, 3) float64 or None
         Irradiance / pi of every node from a uniform world (:func:`with_world`); None: none.
+    exact : (2P, 3) float64 or None
+        The part of ``le`` that :mod:`core.emitters` carries as direct light (the exact
+        emitters' own emission): the solve transports ``le - exact`` and what the surfaces
+        reflect, so a node's solved radiance leaves it out (:meth:`shown` adds it back).
+    direct_exact : (2P, 3) float64 or None
+        The exact emitters' share of ``direct``.
     """
 
     rho: np.ndarray
@@ -78,6 +84,8 @@ class Nodes:
     allowed: np.ndarray
     direct: np.ndarray = None
     sky: np.ndarray = None
+    exact: np.ndarray = None
+    direct_exact: np.ndarray = None
 
     @property
     def arriving(self):
@@ -92,9 +100,23 @@ class Nodes:
         """(2P, 3) what each node sends before any bounce between surfaces: its emission plus
         the direct light it reflects, ``Le + rho E / pi`` (lights shot first)."""
         arriving = self.arriving
+        le = self.le if self.exact is None else self.le - self.exact
         if arriving is None:
-            return self.le
-        return self.le + self.rho * arriving
+            return le
+        return le + self.rho * arriving
+
+    def shown(self, radiance):
+        """(2P, 3) the radiance a viewer sees of every node from the solved (transported)
+        ``radiance``: the exact emitters' own emission added back."""
+        return radiance if self.exact is None else radiance + self.exact
+
+    def exact_power(self):
+        """(emitted, arriving), each (3,): the exact emitters' power and the part of it that
+        reaches the nodes (radiance x area, before pi); zeros without exact emitters."""
+        if self.exact is None:
+            return np.zeros(3), np.zeros(3)
+        a = self.areas[:, None]
+        return (self.exact * a).sum(axis=0), (self.direct_exact * a).sum(axis=0)
 
     @property
     def emitting(self):
@@ -133,10 +155,14 @@ def node_arrays(scene, patches, two_sided, direct=None):
     allowed = np.ones(2 * P, dtype=bool)
     if not two_sided:
         allowed[P:] = False
-    direct_n = None
+    direct_n = exact = direct_exact = None
     if direct is not None and len(direct):
         direct_n = direct.patch_incident(patches, two_sided)
-    return Nodes(rho_n, le_n, areas, allowed, direct_n)
+        if direct.emitters is not None:
+            mine = np.tile(np.isin(patches.face, direct.emitters.faces), 2)
+            exact = np.where(mine[:, None], le_n, 0.0)
+            direct_exact = direct.patch_incident(patches, two_sided, emitters_only=True)
+    return Nodes(rho_n, le_n, areas, allowed, direct_n, exact=exact, direct_exact=direct_exact)
 
 
 @dataclass(frozen=True)
@@ -239,7 +265,8 @@ class Solution:
     Attributes
     ----------
     node_radiance : (2P, 3) float64
-        Zero for nodes never reached.
+        Zero for nodes never reached. Without the exact emitters' own emission
+        (:meth:`Nodes.shown` adds it back).
     result : core.solvers.SolveResult
     solver : str
         The solver that ran.
@@ -327,7 +354,12 @@ def _solve_dense(ff, nodes, settings, solver, monitor):
         incident[black] = black_block.T.astype(np.float64) @ sent
     escaped = ((1.0 - store.row_sums[idx])[:, None] * sent).sum(axis=0)
     absorbed = ((1.0 - rho) * incident).sum(axis=0)
-    emitted = (nodes.le[idx] * areas[idx, None]).sum(axis=0) + _direct_power(nodes)
+    # The exact emitters' power counts as emitted, what of it reaches no node as escaped.
+    exact_out, exact_in = nodes.exact_power()
+    transported = nodes.le if nodes.exact is None else nodes.le - nodes.exact
+    emitted = (transported[idx] * areas[idx, None]).sum(axis=0) + _direct_power(nodes) \
+        + exact_out - exact_in
+    escaped = escaped + exact_out - exact_in
     return Solution(node_radiance, res, solver, ff.active, incident,
                     (emitted, absorbed, escaped), recip, int(matrix_bytes), store, [])
 
@@ -358,9 +390,11 @@ def _solve_matrix_free(ff, nodes, settings, monitor):
         incident = incident + direct
         emitted = emitted - (nodes.rho * direct).sum(axis=0) + direct.sum(axis=0)
         absorbed = absorbed + ((1.0 - nodes.rho) * direct).sum(axis=0)
+    exact_out, exact_in = nodes.exact_power()
     active = np.any(incident > 0, axis=1) | np.any(nodes.source > 0, axis=1)
     return Solution(res.radiance, res, "progressive", active, incident,
-                    (emitted, absorbed, st["escaped"]), recip, int(store.nbytes), None, [])
+                    (emitted + exact_out - exact_in, absorbed,
+                     st["escaped"] + exact_out - exact_in), recip, int(store.nbytes), None, [])
 
 
 def _direct_power(nodes):

@@ -13,7 +13,7 @@ import numpy as np
 from .constants import MAX_REFLECTANCE_EXCLUSIVE, tol
 from .errors import SceneError
 from .geometry import ragged
-from .lights import Lights, make_lights
+from .light_list import Lights, make_lights
 
 
 @dataclass(frozen=True, eq=False)
@@ -48,8 +48,8 @@ class Scene:
     face_duplicate_of : (F,) int64 or None
         Set by :func:`core.duplicates.merge_duplicates`: the kept face each coincident duplicate
         (marked invalid) stands for, -1 for other faces. None: not checked.
-    lights : core.lights.Lights or None
-        Point, spot and sun lights (:func:`core.lights.make_lights`); None: none.
+    lights : core.light_list.Lights or None
+        Point, spot and sun lights (:func:`core.light_list.make_lights`); None: none.
     world : (3,) float64 or None
         Radiance of a uniform world (Blender's world colour x strength) seen in every direction
         no surface covers; None: black.
@@ -181,8 +181,8 @@ def make_scene(vertices, corner_verts, face_starts, face_sizes, face_materials, 
     object_names, material_names : sequence of str, optional
     back_reflectance, back_emission : (M, 3) float, optional
         Material of the back sides (default: the same as the front). Same rules as the front.
-    lights : core.lights.Lights or sequence of dict, optional
-        Point, spot and sun lights (dicts go through :func:`core.lights.make_lights`).
+    lights : core.light_list.Lights or sequence of dict, optional
+        Point, spot and sun lights (dicts go through :func:`core.light_list.make_lights`).
     world : (3,) float, optional
         Radiance of a uniform world, RGB, >= 0 (Blender: world colour x strength).
 

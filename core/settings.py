@@ -155,6 +155,12 @@ METHODS = (
                              "accurate"),
     Choice("hybrid", "Hybrid", "Hemicube, with near patch pairs computed exactly"),
 )
+EXACT_DIRECT = (
+    Choice("auto", "Small", "Emitters too narrow for the hemicube (under 2 of its pixels "
+           "across the scene: small lamps, LED strips)"),
+    Choice("all", "All", "Every emitter (within the limits)"),
+    Choice("off", "Off", "The hemicube sees every emitter"),
+)
 SOLVERS = (
     Choice("auto", "Auto", "Pick the solver from the scene size and memory budget"),
     Choice("direct", "Direct", "Dense linear solve: exact, small scenes only"),
@@ -289,6 +295,12 @@ TABLE = (
             doc="Points whose first round (8 rays on a ring near the light's rim, 1 to its "
                 "centre) agrees, fully lit or fully shadowed, cast no more: only the penumbra "
                 "pays for the samples; a light narrower than min_element casts 1 (core.lights)."),
+    Setting("exact_direct", "choice", "auto", "Exact Emitters",
+            "Which emissive surfaces get their direct light exactly at every point (contour "
+            "integral with shadow rays) instead of through the hemicube", choices=EXACT_DIRECT,
+            exposed=True,
+            doc="At most 64 emissive faces and 10 % of the surfaces' area, by material "
+                "(core.emitters); the hemicube then carries only what they reflect."),
     Setting("vertex_budget", "int", 100_000, "Vertex Budget",
             "Radiosity mesh: most output vertices; the worst elements are split first", low=4,
             soft=(1000, 1_000_000), exposed=True,

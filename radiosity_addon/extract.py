@@ -5,7 +5,7 @@ collection and geometry-node instances included, world transforms and the scene'
 applied. Only real (non-instance) mesh objects receive the result; instances light and shadow
 the scene but share their mesh data with their source, so nothing is written to them.
 Area lights become emitting polygons (see :func:`_add_light`); point, spot and sun lights become
-``core.lights.Lights`` (:func:`light_dict`), in ``arrays["lights"]``.
+``core.light_list.Lights`` (:func:`light_dict`), in ``arrays["lights"]``.
 """
 
 from dataclasses import dataclass, field
@@ -14,7 +14,7 @@ import bpy
 import numpy as np
 
 from ..core.errors import SceneError
-from ..core.lights import make_lights
+from ..core.light_list import make_lights
 from ..core.photometry import read_photometry
 from .materials import MaterialReader, area_light_polygon, area_light_radiance
 
@@ -434,7 +434,7 @@ def _nodes_matter(light):
 
 
 def light_dict(inst, notes=None):
-    """A point, spot or sun light instance as a :func:`core.lights.make_lights` dict.
+    """A point, spot or sun light instance as a :func:`core.light_list.make_lights` dict.
 
     In Blender units (``Lights.scaled`` converts to metres). The light's radius is not scaled
     by the object's scale, as in Cycles (measured). A light node tree is ignored and a spot's

@@ -108,6 +108,7 @@ def draw_advanced(layout, props):
     col.prop(props, "tolerance")
     col.prop(props, "max_iterations", text="Iteration Cap")
     layout.prop(props, "light_samples")
+    _split_row(layout, "Emitters").prop(props, "exact_direct", text="")
     col = layout.column()
     col.prop(props, "contact_cuts")
     col.prop(props, "selected_only")

@@ -108,7 +108,7 @@ _RELATIVE = ({"PATH_SUPPORTS_BLEND_RELATIVE"}
              else set())
 
 #: Per point and spot light (Light datablock): a measured distribution (core.photometry) and what
-#: the light's power means with it (core.lights.PHOTOMETRY_SCALES, upper case).
+#: the light's power means with it (core.light_list.PHOTOMETRY_SCALES, upper case).
 LIGHT_PROPERTIES = dict(
     radiosity_ies=StringProperty(
         name="IES / LDT File", subtype="FILE_PATH", default="", options=_RELATIVE,

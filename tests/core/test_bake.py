@@ -273,7 +273,9 @@ def test_relight_new_emitter_computes_only_new_rows():
     rho = np.vstack([a.reflectance, a.reflectance])
     em_a = np.vstack([a.emission, np.zeros((6, 3))])
     em_b = np.vstack([a.emission, a.emission * 2])
-    s = _settings(patch_size=1.0, rotate_hemicube=False, output_mode="vertices")   # late rows
+    # Rows of the emitters themselves: the hemicube carries their light (exact_direct 'off').
+    s = _settings(patch_size=1.0, rotate_hemicube=False, output_mode="vertices",
+                  exact_direct="off")
     first = bake(scene_from_polygons(verts, polys, mats, rho, em_a), s)
     # All 12 front nodes are solved; of the back nodes only box A's light's (it emits).
     assert first.report["nodes_active"] == 13

@@ -18,7 +18,8 @@ import pytest
 
 from core.bake import bake, relight
 from core.errors import SceneError
-from core.lights import DirectLight, make_lights, spot_factor
+from core.light_list import make_lights
+from core.lights import DirectLight, spot_factor
 from core.patches import make_patches
 from core.scene import scene_from_polygons
 from core.settings import BakeSettings

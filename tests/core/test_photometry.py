@@ -22,7 +22,7 @@ import pytest
 
 from core.bake import bake
 from core.errors import SceneError
-from core.lights import make_lights
+from core.light_list import make_lights
 from core.photometry import Photometry, read_ies, read_ldt, read_photometry
 from core.scene import scene_from_polygons
 from core.settings import BakeSettings

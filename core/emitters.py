@@ -1,0 +1,247 @@
+"""Emissive faces as area lights: their direct light computed exactly at points (issue 11).
+
+A hemicube sees an emitter as the pixels it covers. A source smaller than a pixel is hit by a
+few gather points and missed by the rest (a 1 cm^2 lamp 3 m above a floor: every floor vertex
+read 0), and one a few pixels wide aliases (a 0.3 m panel at 3 m: -25 % to +52 % against the
+exact values, only 41 % of the floor within 5 %). Here each emissive face lights a point ``x``
+as :mod:`core.lights` lights do::
+
+    E(x) / pi = Le x F(x -> face) x V(x)
+
+``F`` is the contour integral (:func:`core.exact.point_polygon_form_factor`): exact for the whole
+face, any size, however near, clipped to ``x``'s horizon. ``V`` is the visible fraction from
+shadow rays to points on the face, each weighted by the point-to-area kernel
+``cos_x cos_y / r^2`` (a fraction of the form factor, not of the area; Wallace, Elmquist & Haines
+1989): ``FIRST_ROUND`` rays and one to the face's anchor; where they disagree (a penumbra),
+``samples`` more. A face narrower than ``min_size`` casts the anchor's ray only. The samples are
+a rank-1 lattice on the face's patches turned per point (Cranley-Patterson), so neighbouring
+points do not share one pattern.
+
+The solve and the gathers then carry only what the emitters *reflect*: their emission enters as
+the first bounce, like a point light's (:class:`core.pipeline.Nodes`, ``exact``).
+
+Which emitters (``exact_direct``): 'auto' the emissive materials too narrow for the hemicube
+(``AUTO_PIXELS``), 'all' every one; in either case fewest faces first, while the faces taken
+stay within ``MAX_FACES`` and their area within ``MAX_AREA_SHARE`` of the scene's (a luminous
+ceiling, or hundreds of faces, is left to the hemicube, which sees a large source well; the cost
+here grows with points x faces).
+"""
+
+import numpy as np
+
+from .exact import bilinear, point_polygon_form_factor
+from .transfer import padded_polygons
+
+#: Emissive faces lit exactly at most (by material, fewest faces first). Measured cost: one
+#: (point, face) pair costs the contour integral (~1.3 us) and FIRST_ROUND + 1 shadow rays
+#: where the face gives more than the culled share (core.lights.CULL).
+MAX_FACES = 64
+
+#: Emissive area lit exactly at most, as a share of all the surfaces' area. A lamp is small
+#: against its room; a luminous ceiling or a furnace (every wall emits) is an extended source
+#: that the hemicube sees well, while the visible fraction of a large face that furniture hides
+#: in part needs many shadow rays (a furnace office with every face emitting: up to 12 % off
+#: with the first round's rays).
+MAX_AREA_SHARE = 0.1
+
+#: 'auto' lights exactly the emitters narrower than this many hemicube pixels seen across the
+#: scene: a 1 cm^2 lamp in a 4 m room (0.16 px at R = 64) is missed by most gathers, a 0.3 m
+#: panel (4.8 px) aliases by -25 % to +52 % at single vertices but is right on average; wider
+#: sources keep the hemicube, whose cost does not grow with the points x faces.
+AUTO_PIXELS = 2.0
+
+#: Shadow rays per (point, emitter) in the first round; where they and the anchor's all agree,
+#: no more are cast.
+FIRST_ROUND = 8
+
+#: Generator of the rank-1 (R2) lattice: the plastic number's powers (Roberts 2018).
+_PLASTIC = 1.3247179572447460
+_ALPHA = np.array([1.0 / _PLASTIC, 1.0 / _PLASTIC ** 2])
+
+
+def exact_materials(scene, mode="all", resolution=64):
+    """(M,) bool: the emissive materials whose faces are lit exactly (see the module doc).
+
+    ``mode``: 'all', 'off', or 'auto': only materials whose every face is narrower than
+    ``AUTO_PIXELS`` pixels of a hemicube of ``resolution`` seen across the scene (width =
+    area / longest edge, against the scene's largest extent).
+    """
+    le = np.asarray(scene.emission, dtype=np.float64)
+    back = np.asarray(scene.back_materials()[1], dtype=np.float64)
+    emissive = np.any(le > 0, axis=1) | np.any(back > 0, axis=1)
+    real = scene.face_areas > 0
+    if mode == "off":
+        return np.zeros(le.shape[0], dtype=bool)
+    if mode == "auto":
+        width = scene.face_areas / np.maximum(_longest_edges(scene), 1e-300)
+        extent = float(np.ptp(scene.vertices, axis=0).max()) if scene.vertices.size else 0.0
+        wide = real & (width * resolution > AUTO_PIXELS * extent)
+        emissive &= np.bincount(scene.face_materials[wide], minlength=le.shape[0]) == 0
+    faces = np.bincount(scene.face_materials[real], minlength=le.shape[0])
+    area = np.bincount(scene.face_materials[real], weights=scene.face_areas[real],
+                       minlength=le.shape[0])
+    out = np.zeros(le.shape[0], dtype=bool)
+    total, total_area, limit = 0, 0.0, MAX_AREA_SHARE * float(area.sum())
+    for m in np.argsort(np.where(emissive, faces, np.iinfo(np.int64).max), kind="stable"):
+        if not emissive[m] or total + faces[m] > MAX_FACES or total_area + area[m] > limit:
+            break
+        out[m] = True
+        total += int(faces[m])
+        total_area += float(area[m])
+    return out
+
+
+def _longest_edges(scene):
+    """(F,) length of every face's longest edge."""
+    cv = scene.corner_verts
+    face = np.repeat(np.arange(scene.face_sizes.size), scene.face_sizes)
+    nxt = np.arange(cv.size) + 1
+    last = scene.face_starts + scene.face_sizes - 1
+    nxt[last] = scene.face_starts
+    edge = np.linalg.norm(scene.vertices[cv[nxt]] - scene.vertices[cv], axis=1)
+    out = np.zeros(scene.face_sizes.size)
+    np.maximum.at(out, face, edge)
+    return out
+
+
+class Emitters:
+    """The exact emitters of a scene as lights (one per emitting side of every face).
+
+    Parameters
+    ----------
+    scene : core.scene.Scene
+    patches : core.patches.Patches
+        The solve's patches: shadow rays aim at points on the emitters' patches.
+    materials : (M,) bool
+        Materials lit exactly (:func:`exact_materials`).
+
+    Attributes
+    ----------
+    face : (n,) int64
+        Scene face of every light (a face emitting from both sides is two lights).
+    sign : (n,) float64
+        +1: the face's front emits; -1: its back.
+    colour : (n, 3) float64
+        Emitted radiance of that side.
+    size : (n,) float64
+        sqrt(area) of the face (m).
+    faces : (f,) int64
+        The faces lit exactly (both their sides: a side that does not emit is no light).
+    """
+
+    def __init__(self, scene, patches, materials):
+        materials = np.asarray(materials, dtype=bool)
+        faces = np.flatnonzero(materials[scene.face_materials] & (scene.face_areas > 0))
+        le = np.asarray(scene.emission, dtype=np.float64)[scene.face_materials[faces]]
+        back = np.asarray(scene.back_materials()[1], dtype=np.float64)[
+            scene.face_materials[faces]]
+        front_on, back_on = np.any(le > 0, axis=1), np.any(back > 0, axis=1)
+        local = np.concatenate([np.flatnonzero(front_on), np.flatnonzero(back_on)])
+        self.face = faces[local]
+        self.sign = np.concatenate([np.ones(front_on.sum()), -np.ones(back_on.sum())])
+        self.colour = np.concatenate([le[front_on], back[back_on]]).reshape(-1, 3)
+        self.size = np.sqrt(scene.face_areas[self.face])
+        self.faces = faces
+        self._slot = np.searchsorted(faces, self.face)            # column in the F matrix
+        polys = padded_polygons(scene.vertices, scene.corner_verts, scene.face_starts,
+                                scene.face_sizes)
+        self._polys = polys[faces] if faces.size else np.zeros((0, 3, 3))
+        self._normal = scene.face_normals[faces]
+        self._centre = self._polys.mean(axis=1) if faces.size else np.zeros((0, 3))
+        # The faces' patches, as cumulative area per face (sampling by inverse CDF).
+        mine = np.isin(patches.face, faces)
+        pid = np.flatnonzero(mine)
+        order = np.lexsort((pid, patches.face[pid]))
+        self._pid = pid[order]
+        self._corners = np.asarray(patches.corners, dtype=np.float64)[self._pid]
+        self._pface = np.searchsorted(faces, patches.face[self._pid])
+        areas = np.asarray(patches.areas, dtype=np.float64)[self._pid]
+        self._start = np.searchsorted(self._pface, np.arange(faces.size))
+        self._stop = np.searchsorted(self._pface, np.arange(faces.size), side="right")
+        self._cum = np.cumsum(areas)
+        self._areas = areas
+        # Anchor: the centre of each face's largest patch (inside the face, concave or not).
+        self._anchor = np.zeros((faces.size, 3))
+        for i in range(faces.size):                         # per emitter face: a few
+            s, e = self._start[i], self._stop[i]
+            if e > s:
+                best = s + int(np.argmax(areas[s:e]))
+                self._anchor[i] = self._corners[best].mean(axis=0)
+            else:
+                self._anchor[i] = self._centre[i]
+
+    def __len__(self):
+        return int(self.face.size)
+
+    def unshadowed(self, origin, normals):
+        """Per light: (n,) ``pi F`` from the points ``origin`` facing ``normals`` to the side of
+        its face that emits (0 where the point sees the other side): the light's factor in the
+        irradiance before shadows."""
+        if not len(self):
+            return []
+        ff = point_polygon_form_factor(origin, normals, self._polys)
+        side = np.einsum("nqj,qj->nq", origin[:, None, :] - self._centre[None], self._normal)
+        out = []
+        for e in range(len(self)):                          # per light, vectorised over points
+            q = self._slot[e]
+            out.append(np.where(self.sign[e] * side[:, q] > 0, np.pi * ff[:, q], 0.0))
+        return out
+
+    def _samples(self, q, shift, index):
+        """Points (g, m, 3) on face slot ``q``: lattice points ``index`` (m,) turned by
+        ``shift`` (g, 2)."""
+        uv = (0.5 + index[None, :, None] * _ALPHA[None, None, :] + shift[:, None, :]) % 1.0
+        s, e = self._start[q], self._stop[q]
+        if e <= s:
+            return np.broadcast_to(self._anchor[q], uv.shape[:2] + (3,))
+        base = self._cum[s] - self._areas[s]
+        total = self._cum[e - 1] - base
+        a = base + uv[..., 0] * total
+        k = np.clip(np.searchsorted(self._cum[s:e], a, side="right"), 0, e - s - 1) + s
+        u = np.clip((a - (self._cum[k] - self._areas[k])) / self._areas[k], 0.0, 1.0)
+        pts, _ = bilinear(self._corners[k.ravel()], u.reshape(-1, 1), uv[..., 1].reshape(-1, 1))
+        return pts.reshape(uv.shape[:2] + (3,))
+
+    def visible(self, e, origin, normals, k, turn, blocked):
+        """Visible fraction (g,) of light ``e`` from ``origin`` (g, 3), kernel-weighted, and
+        whether the ray to its anchor is clear (g,) bool.
+
+        ``k``: rays where the first round disagrees (1: the anchor's ray only); ``turn``: (g,)
+        angles per point; ``blocked(origin, direction)``: shadow rays ending at
+        origin + direction.
+        """
+        q = self._slot[e]
+        g = origin.shape[0]
+        centre = ~blocked(origin, self._anchor[q] - origin)
+        if k <= 1:
+            return centre.astype(np.float64), centre
+        shift = np.stack([turn, turn * _PLASTIC], axis=1) / (2.0 * np.pi)
+
+        def cast(rows, index):
+            y = self._samples(q, shift[rows], index)                      # (r, m, 3)
+            d = y - origin[rows, None, :]
+            r2 = np.einsum("rmj,rmj->rm", d, d)
+            w = np.maximum(np.einsum("rmj,rj->rm", d, normals[rows]), 0.0) \
+                * np.abs(d @ self._normal[q]) / np.maximum(r2, 1e-300) ** 2
+            clear = ~blocked(np.repeat(origin[rows], index.size, axis=0),
+                             d.reshape(-1, 3)).reshape(rows.size, index.size)
+            return clear, w
+
+        everyone = np.arange(g)
+        first, w1 = cast(everyone, np.arange(FIRST_ROUND))
+        frac = _weighted(first, w1)
+        lit = first.sum(axis=1) + centre
+        mixed = np.flatnonzero((lit > 0) & (lit < FIRST_ROUND + 1))
+        if mixed.size:
+            more, w2 = cast(mixed, FIRST_ROUND + np.arange(k))
+            frac[mixed] = _weighted(np.concatenate([first[mixed], more], axis=1),
+                                    np.concatenate([w1[mixed], w2], axis=1))
+        return frac, centre
+
+
+def _weighted(clear, w):
+    """(g,) fraction of the weight ``w`` (g, m) on clear rays (the plain fraction where every
+    weight is 0: a point grazing the face)."""
+    total = w.sum(axis=1)
+    plain = clear.mean(axis=1)
+    return np.where(total > 0, (clear * w).sum(axis=1) / np.where(total > 0, total, 1.0), plain)
