@@ -30,6 +30,7 @@ here grows with points x faces).
 import numpy as np
 
 from .exact import bilinear, point_polygon_form_factor
+from .geometry import patch_extents
 from .transfer import padded_polygons
 
 #: Emissive faces lit exactly at most (by material, fewest faces first). Measured cost: one
@@ -73,7 +74,10 @@ def exact_materials(scene, mode="all", resolution=64):
     if mode == "off":
         return np.zeros(le.shape[0], dtype=bool)
     if mode == "auto":
-        width = scene.face_areas / np.maximum(_longest_edges(scene), 1e-300)
+        polys = padded_polygons(scene.vertices, scene.corner_verts, scene.face_starts,
+                                scene.face_sizes)
+        longest = patch_extents(polys, polys.mean(axis=1))[1]
+        width = scene.face_areas / np.maximum(longest, 1e-300)
         extent = float(np.ptp(scene.vertices, axis=0).max()) if scene.vertices.size else 0.0
         wide = real & (width * resolution > AUTO_PIXELS * extent)
         emissive &= np.bincount(scene.face_materials[wide], minlength=le.shape[0]) == 0
@@ -88,19 +92,6 @@ def exact_materials(scene, mode="all", resolution=64):
         out[m] = True
         total += int(faces[m])
         total_area += float(area[m])
-    return out
-
-
-def _longest_edges(scene):
-    """(F,) length of every face's longest edge."""
-    cv = scene.corner_verts
-    face = np.repeat(np.arange(scene.face_sizes.size), scene.face_sizes)
-    nxt = np.arange(cv.size) + 1
-    last = scene.face_starts + scene.face_sizes - 1
-    nxt[last] = scene.face_starts
-    edge = np.linalg.norm(scene.vertices[cv[nxt]] - scene.vertices[cv], axis=1)
-    out = np.zeros(scene.face_sizes.size)
-    np.maximum.at(out, face, edge)
     return out
 
 
