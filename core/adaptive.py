@@ -14,7 +14,7 @@ leaves are split where
   emitters, and to each light's centre) and the contrast exceeds ``SHADOW_CONTRAST`` x
   ``contrast``, even where the light across the parent looked linear;
 * a contact line runs along the leaf (the light falls off steeply towards an object's foot) and
-  the leaf is larger than ``CONTACT_ELEMENT``;
+  the leaf is larger than ``CONTACT_ELEMENT`` x ``min_element``;
 
 (the criteria and their constants: :mod:`core.criteria`), never below ``min_element`` and
 within ``vertex_budget`` points, worst first (score: the leaf's

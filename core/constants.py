@@ -70,6 +70,15 @@ class Tolerances:
     #: Relative size (against the polygon's squared extent) below which an ear triangle counts as
     #: degenerate (collinear corners) in ear clipping: float64 rounding of 2-D cross products.
     ear_area: float = 1e-14
+    #: Ears whose smallest angles differ by less than this (radians) tie in ear clipping, and the
+    #: first in the polygon's corner order is clipped: float64 rounding of a regular n-gon's equal
+    #: angles (~1e-15) must not decide, or the same polygon scaled or moved elsewhere is
+    #: triangulated otherwise (tests/core/test_fuzz.py).
+    ear_angle: float = 1e-9
+    #: Edges whose lengths differ by less than this fraction tie for a triangle's shortest edge
+    #: (the one its fan strip keeps coarse), and the first in the triangle's corner order wins:
+    #: an isosceles triangle of a regular n-gon fans the same way wherever it stands.
+    edge_tie: float = 1e-9
     #: Slack on the crease cosine: coplanar faces whose float64 normals differ by rounding (cos just
     #: below 1) must still join at crease_angle = 0.
     crease_cos: float = 1e-12

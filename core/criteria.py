@@ -33,8 +33,10 @@ SHADOW_CONTRAST = 1.0
 #: 3.8 % with 1,464, but the office +70 % vertices for 0.2 points).
 STEEP_FLOOR = 0.25
 
-#: Leaves along a contact line are split down to this size (m) (or min_element if larger).
-CONTACT_ELEMENT = 0.25
+#: Leaves along a contact line are split down to this many times min_element (0.25 m at the
+#: default 0.05 m). A multiple, not metres: with 0.25 m a model in millimetres (min_element
+#: scaled with it) was never split along its contacts (tests/core/test_fuzz.py).
+CONTACT_ELEMENT = 5.0
 
 #: Alone points lie within the contacts' tolerance of a contact line; lines are tested against
 #: points in chunks of this many (point, line) pairs.
@@ -309,7 +311,7 @@ def per_leaf_scores(tree, conf, corner_y, corner_vis, corner_alone, emitting_lea
     score = np.maximum(score, np.where(shadow, area, 0.0))
     touches = _per_leaf(conf, corner_alone.astype(np.int64), E, np.maximum, np.int64(0)) > 0
     size = np.asarray(tree.sizes, dtype=np.float64)
-    contact = touches & (size > max(CONTACT_ELEMENT, 2.0 * settings.min_element))
+    contact = touches & (size > CONTACT_ELEMENT * settings.min_element)
     score = np.maximum(score, np.where(contact, 0.5 * area, 0.0))
     score[emitting_leaf] = 0.0
     limit = np.where(touches, smallest_split(diff, settings), 2.0 * settings.min_element)

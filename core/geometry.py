@@ -267,7 +267,8 @@ def triangulate_polygon(points, normal):
         if ok.size:
             pa, pb, pc = a[ok], b[ok], c[ok]
             angles = np.stack([_angle(pa, pb, pc), _angle(pb, pc, pa), _angle(pc, pa, pb)], axis=1)
-            pick = int(ok[np.argmax(angles.min(axis=1))])
+            smallest = angles.min(axis=1)
+            pick = int(ok[np.argmax(smallest >= smallest.max() - tol.ear_angle)])
         else:
             # No clean ear (numerically degenerate or self-touching input): clip the most convex
             # corner so the loop always ends; a zero-area triangle is dropped below.

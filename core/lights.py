@@ -60,8 +60,9 @@ RIM = 0.95
 PATCH_ORDER = 3
 PATCH_SAMPLES = 4
 
-#: Shadow rays leave the receiver this far (relative to the scene's extent, at least 1 m x this)
-#: along its normal, so that they do not hit the receiver's own surface.
+#: Shadow rays leave the receiver this far (relative to the scene's extent) along its normal, so
+#: that they do not hit the receiver's own surface. Relative only: a floor of 1 m x this made a
+#: model smaller than 1 m bake differently from the same model scaled up (tests/core/test_fuzz.py).
 RAY_OFFSET = 1e-6
 
 #: At each point, the lights whose unshadowed light there adds up to at most this fraction of
@@ -147,7 +148,8 @@ class DirectLight:
         tris = ray_triangles(patches)[0]
         self.bvh = build_bvh(tris)
         extent = float(np.ptp(patches.corners.reshape(-1, 3), axis=0).max())
-        self.offset = RAY_OFFSET * max(extent, 1.0)
+        self.lo = patches.corners.reshape(-1, 3).min(axis=0)   # the patterns' origin
+        self.offset = RAY_OFFSET * extent
         self.extent = max(extent, np.finfo(float).tiny)
         self.rays = 0
         self.culled = 0                     # (point, light) pairs that cast no shadow rays
@@ -237,7 +239,7 @@ class DirectLight:
         if n == 0:
             return
         origin = points + self.offset * normals
-        turn = _turn(points / self.extent)          # the same pattern at any scale
+        turn = _turn((points - self.lo) / self.extent)   # the same at any scale and place
         unshadowed = [self._unshadowed(j, origin, normals) for j in range(len(lt))]
         if self.emitters is not None:
             em = self.emitters
