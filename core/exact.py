@@ -123,7 +123,8 @@ def _pair_form_factor(x, n, polys):
     return np.where(above & ~edge_on & (count >= 3), f, 0.0)
 
 
-def _as_points(name, value):
+def as_points(name, value):
+    """``value`` as a float64 (S, 3) array; ValueError naming ``name`` otherwise."""
     a = np.asarray(value, dtype=np.float64)
     if a.ndim != 2 or a.shape[1] != 3:
         raise ValueError(f"{name} must have shape (S, 3); got {a.shape}")
@@ -150,8 +151,8 @@ def point_polygon_form_factor(points, normals, polygons):
         F >= 0, the part of each polygon above each point's tangent plane; 0 for a polygon in
         (or under) the tangent plane. Visibility is not considered.
     """
-    x = _as_points("points", points)
-    n = _as_points("normals", normals)
+    x = as_points("points", points)
+    n = as_points("normals", normals)
     if n.shape != x.shape:
         raise ValueError(f"normals must have shape {x.shape} like points; got {n.shape}")
     nn = np.linalg.norm(n, axis=1)
@@ -208,7 +209,7 @@ def bilinear(corners, u, v):
     return p, np.linalg.norm(np.cross(du, dv), axis=-1)
 
 
-def _stratified(rng, m, rays):
+def stratified(rng, m, rays):
     """Jittered nx x ny strata in the unit square for m pairs: u, v of shape (m, rays)."""
     nx = max(d for d in range(1, int(np.sqrt(rays)) + 1) if rays % d == 0)
     ny = rays // nx
@@ -224,7 +225,7 @@ def gauss_square(order):
     return np.repeat(g, order), np.tile(g, order), np.outer(w, w).ravel()
 
 
-class _Geometry:
+class RayGeometry:
     """Patch arrays validated once, plus the ray-casting set-up."""
 
     def __init__(self, patches, bvh):
@@ -271,7 +272,8 @@ def _same_triangles(bvh, tris):
             and np.array_equal(bvh.e2, t[:, 2] - t[:, 0]))
 
 
-def _check_common(rays, rng):
+def check_common(rays, rng):
+    """Validated (rays, rng) of the ray-traced methods: rng None -> a generator seeded with 0."""
     if not is_int(rays) or rays < 1:
         raise ValueError(f"rays must be an integer >= 1; got {rays!r}")
     if rng is None:
@@ -363,11 +365,11 @@ def _visible_fraction(geo, src, n, tgt, rays, rng, area_source):
     """Kernel-weighted fraction of ``rays`` rays from the source to the target that arrive."""
     m = src.size
     if area_source:
-        su, sv = _stratified(rng, m, rays)
+        su, sv = stratified(rng, m, rays)
         xs, _ = bilinear(geo.corners[src], su, sv)
     else:
         xs = np.broadcast_to(geo.centres[src][:, None, :], (m, rays, 3))
-    tu, tv = _stratified(rng, m, rays)
+    tu, tv = stratified(rng, m, rays)
     y, jac = bilinear(geo.corners[tgt], tu, tv)
     origin = xs + geo.offset * n[:, None, :]
     d = y - origin
@@ -415,10 +417,10 @@ def exact_rows(patches, sources, *, rays=16, rng=None, bvh=None, source_order=1)
         Row i: fraction of what leaves node ``sources[i]`` that lands on each node; column q when
         q is hit from its front, q + P from its back. A source never sees its own patch.
     """
-    geo = _Geometry(patches, bvh)
+    geo = RayGeometry(patches, bvh)
     p = geo.n_patches
     nodes = check_sources(sources, 2 * p)
-    rays, rng = _check_common(rays, rng)
+    rays, rng = check_common(rays, rng)
     order = _check_order(source_order)
     out = np.zeros((nodes.size, 2 * p))
     rows = max(1, PAIR_CHUNK // p)
@@ -510,10 +512,10 @@ def hybrid_rows(patches, sources, *, resolution=64, near=NEAR_DEFAULT, rays=16, 
     (S, 2P) float64
         Both columns (q and q + P) of every near pair come from the exact method.
     """
-    geo = _Geometry(patches, bvh)
+    geo = RayGeometry(patches, bvh)
     p = geo.n_patches
     nodes = check_sources(sources, 2 * p)
-    rays, rng = _check_common(rays, rng)
+    rays, rng = check_common(rays, rng)
     order = _check_order(source_order)
     if not is_real(near) or near < 0:
         raise ValueError(f"near must be a finite number >= 0; got {near!r}")

@@ -25,7 +25,7 @@ from .validate import check_bool, check_sources, is_int
 
 
 
-def _patch_geometry(patches):
+def patch_geometry(patches):
     """Pull (centres, normals, corners) out of a Patches-like object, validated."""
     for attr in ("centres", "normals", "corners"):
         if not hasattr(patches, attr):
@@ -60,7 +60,8 @@ def _check_frames(centres, normals, corners):
                          f"at patch {i}")
 
 
-def _make_rng(rng):
+def make_rng(rng):
+    """``rng`` as a numpy Generator (an int seeds one); TypeError for anything else."""
     if isinstance(rng, np.random.Generator):
         return rng
     if is_int(rng):
@@ -69,7 +70,7 @@ def _make_rng(rng):
                     f"got {type(rng).__name__}")
 
 
-def _eye_frames(centres, normals, corners, sources, n_patches, diag, angles):
+def eye_frames(centres, normals, corners, sources, n_patches, diag, angles):
     """Eyes (S, 3) and eye frames (S, 3, 3) (rows x, y, z = viewing normal) of source nodes.
 
     The unrotated x axis follows the patch's first edge, so a hemicube is aligned with the
@@ -149,13 +150,13 @@ def polygon_rows(polys, poly_patch, centres, normals, corners, sources, *, resol
     check_bool("cull_back", cull_back)
     angles = None
     if rotate:
-        angles = _make_rng(rng).uniform(0.0, 2.0 * np.pi, size=src.size)
+        angles = make_rng(rng).uniform(0.0, 2.0 * np.pi, size=src.size)
     out = np.zeros((src.size, 2 * n_patches))
     if src.size == 0 or polys.shape[0] == 0:
         return out
     geometry = _geometry if _geometry is not None else Geometry(polys, poly_patch, normals)
     sc = Scene(geometry, n_patches, resolution, bool(cull_back))
-    eyes, frames = _eye_frames(centres, normals, corners, src, n_patches, sc.diag, angles)
+    eyes, frames = eye_frames(centres, normals, corners, src, n_patches, sc.diag, angles)
     rows_in_chunks(sc, eyes, frames, out, timings)
     return out
 
@@ -232,8 +233,8 @@ def hemicube_rows(patches, sources, *, resolution=64, rotate=False, rng=None, cu
     Cost is about linear in S x P + S x R^2 (see ``bench/bench_hemicube.py``); callers that
     poll for progress should pass batches of sources sized to take 0.1-0.2 s.
     """
-    centres, normals, corners = _patch_geometry(patches)
-    polys, poly_patch, geometry = _drawn(patches, normals)
+    centres, normals, corners = patch_geometry(patches)
+    polys, poly_patch, geometry = drawn_polygons(patches, normals)
     return polygon_rows(polys, poly_patch, centres, normals, corners, sources,
                         resolution=resolution, rotate=rotate, rng=rng, cull_back=cull_back,
                         _geometry=geometry)
@@ -275,12 +276,12 @@ def point_rows(patches, points, normals, *, resolution=64, rotate=False, rng=Non
         bad = int(np.argmax(np.abs(length - 1.0)))
         raise ValueError(f"normals must be unit vectors; normals[{bad}] has length {length[bad]:.6g}")
     check_bool("rotate", rotate)
-    _, n_normals, _ = _patch_geometry(patches)
+    _, n_normals, _ = patch_geometry(patches)
     n_patches = n_normals.shape[0]
     out = np.zeros((points.shape[0], 2 * n_patches))
     if points.shape[0] == 0:
         return out
-    polys, poly_patch, geometry = _drawn(patches, n_normals)
+    polys, poly_patch, geometry = drawn_polygons(patches, n_normals)
     sc = Scene(geometry, n_patches, resolution, False)
     z = normals
     axis = np.eye(3)[np.argmin(np.abs(z), axis=1)]
@@ -288,7 +289,7 @@ def point_rows(patches, points, normals, *, resolution=64, rotate=False, rng=Non
     x /= np.linalg.norm(x, axis=1, keepdims=True)
     y = np.cross(z, x)
     if rotate:
-        ang = _make_rng(rng).uniform(0.0, 2.0 * np.pi, size=points.shape[0])
+        ang = make_rng(rng).uniform(0.0, 2.0 * np.pi, size=points.shape[0])
         c, s_ = np.cos(ang)[:, None], np.sin(ang)[:, None]
         x, y = c * x + s_ * y, c * y - s_ * x
     frames = np.stack([x, y, z], axis=1)
@@ -297,7 +298,7 @@ def point_rows(patches, points, normals, *, resolution=64, rotate=False, rng=Non
     return out
 
 
-def _drawn(patches, normals):
+def drawn_polygons(patches, normals):
     """(polys, poly_patch, Geometry) of ``patches``, from the cache when it holds them."""
     cached = _CACHE.get("patches")
     if cached is not None and cached() is patches:

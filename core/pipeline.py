@@ -31,7 +31,7 @@ from .gather import corner_groups, gather_rows, gathered_colours
 from .orient import BACKLIGHT_RATIO, MIN_LIT
 from .progress import SubMonitor
 from .reciprocity import asymmetry, make_reciprocal
-from .rows import Batcher, RowStore, discover, row_function, row_seconds
+from .rows import RECIPROCAL_METHODS, Batcher, RowStore, discover, row_function, row_seconds
 from .solvers import (matvec, solve_direct, solve_gauss_seidel, solve_jacobi,
                       solve_progressive)
 
@@ -320,7 +320,7 @@ def _solve_dense(ff, nodes, settings, solver, monitor):
     F = store.assemble(idx, idx, dtype, monitor)
     use_recip = settings.reciprocity
     if use_recip == "auto":
-        use_recip = settings.method == "hemicube"
+        use_recip = settings.method in RECIPROCAL_METHODS
     if use_recip:
         F, recip = make_reciprocal(F, areas[idx], monitor=monitor)
     else:

@@ -16,6 +16,8 @@ from .exact import exact_rows, hybrid_rows, ray_triangles
 from .hemicube import hemicube_rows
 from .progress import Monitor, poll
 from .raycast import build_bvh
+from .nusselt import nusselt_rows
+from .raytraced import raytraced_rows
 from .settings import METHODS, BY_NAME
 
 #: Form-factor batches are sized for about this much work, so that progress and cancel are
@@ -27,10 +29,14 @@ BATCH_SECONDS = 0.15
 #: visibility rays) depend on its composition, and the bake must be deterministic given
 #: ``seed``. Fitted on room_with_boxes at R = 64 (bench/bench_solvers.py): 2.0 ms per row at
 #: 1000 triangles, 4.1 ms at 4000, 17.6 ms at 16000; 'exact' 0.18 s per row at 490 patches
-#: with 16 rays; 'hybrid' about 3 hemicubes.
+#: with 16 rays; 'hybrid' about 3 hemicubes; 'raytraced' 2 x 'exact' per pair and ray
+#: (bench/bench_raytraced.py: 0.22 s per row at 490 patches, 16 rays, against exact's 0.10 s).
 ROW_SECONDS_PER_PIXEL = 2.5e-7
 ROW_SECONDS_PER_TRIANGLE = 1.0e-6
 ROW_SECONDS_PER_PAIR_RAY = 2.3e-5
+RAYTRACED_COST_FACTOR = 2.0
+#: 'nusselt' against the hemicube at the same R (bench/bench_nusselt.py: 1.0-1.9 x, 1.3 typical).
+NUSSELT_COST_FACTOR = 1.3
 HYBRID_COST_FACTOR = 3.0
 
 #: A batch never holds more than this many float64 row entries (S x 2P): 64 MB.
@@ -41,6 +47,11 @@ MAX_BATCH_SOURCES = 1024
 BATCH_GROWTH = 4
 
 _METHOD_NAMES = tuple(c.value for c in METHODS)
+
+#: Methods that draw every source as a point (rows from its centre): reciprocity='auto' makes
+#: their rows reciprocal. The exact, hybrid and ray-traced rows integrate over both patches
+#: where it matters and are left as they are.
+RECIPROCAL_METHODS = ("hemicube", "nusselt")
 
 
 def compact_rows(rows):
@@ -152,6 +163,10 @@ def row_function(patches, method, resolution, rotate, rng, rays, near=BY_NAME["n
         def rows(sources):
             return hemicube_rows(patches, sources, resolution=resolution, rotate=rotate, rng=rng)
         return rows
+    if method == "nusselt":
+        def rows(sources):
+            return nusselt_rows(patches, sources, resolution=resolution, rotate=rotate, rng=rng)
+        return rows
     if method not in _METHOD_NAMES:
         raise SettingsError(f"method must be one of {_METHOD_NAMES}; got {method!r}")
     bvh = build_bvh(ray_triangles(patches)[0])
@@ -161,6 +176,10 @@ def row_function(patches, method, resolution, rotate, rng, rays, near=BY_NAME["n
         def rows(sources):
             return exact_rows(patches, sources, rays=rays, rng=rng, bvh=bvh,
                               source_order="adaptive")
+        return rows
+    if method == "raytraced":
+        def rows(sources):
+            return raytraced_rows(patches, sources, rays=rays, rng=rng, bvh=bvh)
         return rows
 
     def rows(sources):
@@ -177,7 +196,10 @@ def row_seconds(patches, method, resolution, rays):
         return hemi
     if method == "hybrid":
         return HYBRID_COST_FACTOR * hemi
-    return ROW_SECONDS_PER_PAIR_RAY * len(patches.areas) * rays
+    if method == "nusselt":
+        return NUSSELT_COST_FACTOR * hemi
+    pair_ray = ROW_SECONDS_PER_PAIR_RAY * len(patches.areas) * rays
+    return RAYTRACED_COST_FACTOR * pair_ray if method == "raytraced" else pair_ray
 
 
 class Batcher:
@@ -202,7 +224,8 @@ def form_factor_matrix(patches, *, method="hemicube", resolution=64, rotate=Fals
     Parameters
     ----------
     patches : core.patches.Patches
-    method : {'hemicube', 'exact', 'hybrid'}
+    method : str
+        One of core.settings.METHODS ('hemicube', 'exact', 'hybrid', 'raytraced', ...).
     resolution : int
         Hemicube resolution.
     rotate : bool
@@ -210,7 +233,7 @@ def form_factor_matrix(patches, *, method="hemicube", resolution=64, rotate=Fals
     rng : numpy.random.Generator, optional
         Default: ``np.random.default_rng(0)``.
     rays : int
-        Visibility rays per pair ('exact', 'hybrid').
+        Visibility rays per pair ('exact', 'hybrid'), source samples ('raytraced').
     monitor : core.progress.Monitor, optional
 
     Returns

@@ -151,9 +151,15 @@ MAX_LABEL = 15
 METHODS = (
     Choice("hemicube", "Hemicube", "Cohen-Greenberg hemicube, made reciprocal (default: on the "
                                    "speed-accuracy front against Cycles)"),
+    Choice("nusselt", "Hemisphere Base", "Nusselt analog (Doi & Itoh 1998): the scene "
+                                         "projected onto the hemisphere's base, one pixel one "
+                                         "weight, made reciprocal"),
     Choice("exact", "Exact", "Contour-integral form factors with ray-traced visibility: slow, "
                              "accurate"),
     Choice("hybrid", "Hybrid", "Hemicube, with near patch pairs computed exactly"),
+    Choice("raytraced", "Ray Traced", "Wallace et al. 1989: rays from receiver points to samples "
+                                      "on the source, each a small disc: slow, noisy near "
+                                      "sources"),
 )
 EXACT_DIRECT = (
     Choice("auto", "Small", "Emitters too narrow for the hemicube (under 2 of its pixels "
@@ -197,7 +203,8 @@ TABLE = (
     Setting("method", "choice", "hemicube", "Form Factors", "How form factors are computed",
             choices=METHODS, exposed=True),
     Setting("resolution", "int", 64, "Resolution",
-            "Hemicube resolution: pixels across the top face (even)", unit="px", low=4,
+            "Hemicube resolution: pixels across the top face (even); 'nusselt': across the "
+            "base square", unit="px", low=4,
             high=MAX_RESOLUTION, even=True, soft=(8, 512), exposed=True,
             doc=f"At most {MAX_RESOLUTION}: the rasteriser's pixel indices must be exact in "
                 "float32."),
@@ -245,10 +252,11 @@ TABLE = (
     Setting("seed", "int", 0, "Seed",
             "Seed of every random choice (hemicube rotations, rays)", low=0),
     Setting("rays", "int", 16, "Rays",
-            "Visibility rays per patch pair of the 'exact' and 'hybrid' methods", low=1),
+            "Visibility rays per patch pair of the 'exact' and 'hybrid' methods; source samples "
+            "per receiver point of 'raytraced'", low=1),
     Setting("reciprocity", "bool_or_auto", "auto", "Reciprocity",
             "Make the kept form factors reciprocal with their row sums kept; 'auto': on for "
-            "'hemicube'",
+            "'hemicube' and 'nusselt'",
             doc="Dense solves only: matrix-free shooting conserves energy by construction. On "
                 "room_with_boxes(500) it cuts the hemicube's error against the exact method "
                 "from 85 % to 25 % and the energy imbalance from -27 % to 0; off for 'hybrid' "

@@ -372,7 +372,8 @@ def test_report_keys(small_room_direct):
 @pytest.mark.parametrize("name, value, message", [
     ("patch_size", 0.0, "patch_size must be a finite number > 0"),
     ("patch_size", float("nan"), "patch_size must be a finite number > 0"),
-    ("method", "radiance", "method must be one of 'hemicube', 'exact', 'hybrid'; got 'radiance'"),
+    ("method", "radiance", "method must be one of 'hemicube', 'nusselt', 'exact', 'hybrid', "
+                          "'raytraced'; got 'radiance'"),
     ("resolution", 33, r"resolution must be an even integer in \[4, 2048\] \(px\); got 33"),
     ("resolution", 64.0, r"resolution must be an even integer in \[4, 2048\] \(px\); got 64.0"),
     ("resolution", 3000, r"resolution must be an even integer in \[4, 2048\] \(px\); got 3000"),
