@@ -1,0 +1,147 @@
+"""4. Long thin triangles at room corners: walls as fans of slivers from a room corner.
+
+Oracle (invariance): the same room with each wall one quad. Compared: the written field at
+points on the floor and on the walls (interpolated linearly over the output triangles, as a
+renderer reads it) and each wall's mean.
+"""
+
+import numpy as np
+
+from . import scenes
+from .common import DEFAULT_METHOD, chart, guard, interpolate, mesh_mean, methods, pct, \
+    rel_mean_abs, secs, table, tests_named
+from .report import Section
+
+NOISE_FACTOR = 2.0
+WALLS = ("wall y0", "wall x1", "wall y1", "wall x0")
+#: Sample grid per surface (points a tenth of a cell in from the edges).
+GRID = (10, 8)
+
+
+def _grid(origin, u, v, n=GRID):
+    s = (np.arange(n[0]) + 0.5) / n[0]
+    t = (np.arange(n[1]) + 0.5) / n[1]
+    o, u, v = (np.asarray(a, dtype=np.float64) for a in (origin, u, v))
+    return np.array([o + a * u + b * v for a in s for b in t])
+
+
+def samples():
+    """{surface: (points (S, 3), normal (3,))} on the floor and the four walls."""
+    W, D, H = scenes.ROOM
+    out = {"floor": (_grid((0, 0, 0), (W, 0, 0), (0, D, 0)), np.array([0, 0, 1.0]))}
+    for name, poly in scenes.room_walls(W, D, H):
+        n = np.cross(poly[1] - poly[0], poly[3] - poly[0])
+        out[name] = (_grid(poly[0], poly[1] - poly[0], poly[3] - poly[0]), n / np.linalg.norm(n))
+    return out
+
+
+def fields(result, groups):
+    """{surface: field at its samples}, {wall: mean}."""
+    m = result.output
+    f = {k: interpolate(m, groups[k], pts, n) for k, (pts, n) in samples().items()}
+    return f, {w: mesh_mean(m, groups[w]) for w in WALLS}
+
+
+def errors(got, ref):
+    """(floor field, wall field, worst wall mean) errors of ``got`` against ``ref``."""
+    (fa, ma), (fb, mb) = got, ref
+    floor = rel_mean_abs(fa["floor"], fb["floor"])
+    wa = np.concatenate([fa[w] for w in WALLS])
+    wb = np.concatenate([fb[w] for w in WALLS])
+    walls = rel_mean_abs(wa, wb)
+    mean = max(abs(ma[w] - mb[w]) / mb[w] for w in WALLS)
+    return floor, walls, mean
+
+
+def run(ctx):
+    fans = ctx.pick([2, 8, 32], [4])
+    refs = {}
+    for method in methods():
+        if method != DEFAULT_METHOD and ctx.quick:
+            continue
+        for seed in ((0, 1) if method == DEFAULT_METHOD else (0,)):
+            scene, groups = scenes.room()
+            r = ctx.gate.run(scene, ctx.settings(seed=seed, method=method))
+            ctx.log(f"slivers quads {method} seed {seed}: {r.status} {r.seconds:.1f} s")
+            if r.ok:
+                refs[method, seed] = (fields(r.result, groups), r)
+    noise = errors(refs[DEFAULT_METHOD, 1][0], refs[DEFAULT_METHOD, 0][0])
+    ctx.log(f"slivers: seed noise {noise}")
+    rows, data, aspects = [], {}, {}
+    base = refs[DEFAULT_METHOD, 0][1]
+    rows.append(["quads", "1", f"`{DEFAULT_METHOD}`", base.result.report["patches"],
+                 base.result.output.vertices.shape[0], "", "", "", secs(base.seconds)])
+    for n in fans:
+        scene, groups = scenes.room(fan_walls=n)
+        tris = [scene.vertices[scene.corner_verts[s:s + 3]]
+                for s, k in zip(scene.face_starts, scene.face_sizes) if k == 3]
+        aspects[n] = max(scenes.aspect(t) for t in tris)
+        for method in methods():
+            if (method, 0) not in refs:
+                continue
+            r = ctx.gate.run(scene, ctx.settings(method=method))
+            ctx.log(f"slivers fan {n} {method}: {r.status} {r.seconds:.1f} s")
+            if not r.ok:
+                rows.append([f"fan of {n}", f"{aspects[n]:.0f}", f"`{method}`", r.status, "", "",
+                             "", "", secs(r.seconds)])
+                continue
+            err = errors(fields(r.result, groups), refs[method, 0][0])
+            data[method, n] = err
+            rows.append([f"fan of {n}", f"{aspects[n]:.0f}", f"`{method}`",
+                         r.result.report["patches"], r.result.output.vertices.shape[0],
+                         pct(err[0]), pct(err[1]), pct(err[2]), secs(r.seconds)])
+
+    name = "stability_slivers.png"
+    xs = [aspects[n] for n in fans]
+    labels = ("floor field", "wall field", "worst wall mean")
+    panels = [dict(xlabel="largest triangle aspect ratio (longest edge / its height)",
+                   ylabel="|error| against the quad room (%)", logx=True, percent=True,
+                   subtitle=f"{DEFAULT_METHOD} (default)",
+                   series=[(lab, xs, [data.get((DEFAULT_METHOD, n), (None,) * 3)[k]
+                                      for n in fans]) for k, lab in enumerate(labels)],
+                   hlines=[(NOISE_FACTOR * noise[1], "2 x seed noise, wall field")])]
+    others = [m for m in methods() if any((m, n) in data for n in fans) and m != DEFAULT_METHOD]
+    if others:
+        panels.append(dict(xlabel="largest triangle aspect ratio", logx=True, percent=True,
+                           ylabel="wall field |error| against the method's quad room (%)",
+                           subtitle="every method (skipped where too slow)",
+                           series=[(m, xs, [data.get((m, n), (None,) * 3)[1] for n in fans])
+                                   for m in methods() if any((m, n) in data for n in fans)]))
+    chart(ctx.images / name, "Walls as fans of slivers from a room corner, against the same "
+          "room with quad walls", panels=panels)
+
+    d = [data[DEFAULT_METHOD, n] for n in fans if (DEFAULT_METHOD, n) in data]
+    worst = [max(x[k] for x in d) for k in range(3)]
+    guards = tests_named(r"sliver")
+    sec = Section(
+        key="slivers", title="Long thin triangles at room corners",
+        provocation="each wall a fan of 2 to " + f"{max(fans)} triangles from a room corner "
+                    f"(aspect up to {max(xs):.0f})",
+        worst=f"floor field {pct(worst[0])}, wall field {pct(worst[1])}, wall mean "
+              f"{pct(worst[2])} (2 x seed noise: {pct(NOISE_FACTOR * noise[0])}, "
+              f"{pct(NOISE_FACTOR * noise[1])}, {pct(NOISE_FACTOR * noise[2])})",
+        mitigation="none specific in the measured code (a mechanism is in progress): patch "
+                   "grids of the triangles as they come (`core/patches.py`)",
+        guards=[guard(g) for g in guards] or ["none yet"])
+    sec.blocks += [
+        "**Scene.** The room of class 2; each wall (4 × 2.5 m or 3 × 2.5 m) a fan of about n "
+        "triangles from its bottom corner at a room corner to points spaced evenly along its "
+        "two far edges, the rest of the room as quads. Default settings. **Oracle.** The same room "
+        "with quad walls (same method, seed 0): the written field at a 10 × 8 grid on the "
+        "floor and on every wall (mean |difference| over mean), and each wall's mean. "
+        "**Tolerance**: twice the seed noise (seeds 0 and 1 of the quad room: floor "
+        f"{pct(noise[0])}, walls {pct(noise[1])}, wall mean {pct(noise[2])}).",
+    ]
+    sec.chart_link(name, "error against the slivers' aspect ratio")
+    sec.blocks.append(table(["walls", "aspect", "method", "patches", "output vertices",
+                             "floor field", "wall field", "worst wall mean", "time"], rows))
+    over = [f"{n} ({labels[k]})" for n in fans for k in range(3)
+            if (DEFAULT_METHOD, n) in data and data[DEFAULT_METHOD, n][k] > NOISE_FACTOR
+            * noise[k]]
+    sec.blocks.append(
+        "**What the default does.** "
+        + (f"Beyond twice the seed noise at fans of {', '.join(over)}." if over else
+           "Within twice the seed noise at every fan.")
+        + " The patches and output vertices columns give the cost the slivers add. Guarding "
+          "tests are looked up by name (`sliver` in a test's name under tests/core).")
+    return sec
