@@ -15,7 +15,8 @@ Run (Blender's Python environment, from the repository root)::
   :func:`bench.compare.metrics.reference_noise`). Cycles bakes are cached in
   ``bench/results/cache`` under the names bench/compare/run.py uses (kept out of git).
 * Adaptive: our bake of the coarse model ``sample_blends/<scene>.blend`` (``output_mode='mesh'``,
-  defaults, then ``contrast`` / ``min_element`` variants); the output field is sampled at the
+  defaults, then ``contrast`` / ``min_element`` variants, ``--exact-direct`` modes and
+  ``--methods`` form-factor methods); the output field is sampled at the
   reference's corners (:func:`locate`, :func:`sample_field`).
 * Uniform: our bake with ``output_mode='vertices'`` of copies meshed as grids of ``--grids`` metres
   (scripts/make_cornell_box.py, run with .venv-bpy42), patch size = grid; sampled the same way.
@@ -339,6 +340,8 @@ def adaptive_runs(args):
     runs = [("adaptive (defaults)", {})]
     runs += [("adaptive contrast %g" % c, dict(contrast=c)) for c in args.contrasts]
     runs += [("adaptive min_element %g" % m, dict(min_element=m)) for m in args.min_elements]
+    runs += [("adaptive emitters %s" % e, dict(exact_direct=e)) for e in args.exact_direct]
+    runs += [("adaptive method %s" % m, dict(method=m)) for m in args.methods]
     return runs
 
 
@@ -551,6 +554,10 @@ def main(argv=None):
                          "the reference's own mesh), office 0.8 0.4 0.2 (0.2 is)")
     ap.add_argument("--contrasts", nargs="*", type=float, default=[0.05, 0.2])
     ap.add_argument("--min-elements", nargs="*", type=float, default=[0.1, 0.025])
+    ap.add_argument("--exact-direct", nargs="*", default=[], choices=["all", "off"],
+                    help="also run these exact_direct modes (the default 'auto' always runs)")
+    ap.add_argument("--methods", nargs="*", default=[],
+                    help="also run these form-factor methods (core.settings.METHODS)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--cache", default=str(ROOT / "bench" / "results" / "cache"))
     ap.add_argument("--out", default=str(ROOT / "bench" / "results"))
