@@ -38,7 +38,7 @@ from .criteria import (SHADOW_SAMPLES, EmitterSamples, contact_edges, contact_po
                        interpolation_errors, luminance, per_leaf_scores)
 from .duplicates import copy_duplicate_faces
 from .elements import bake_elements
-from .gather import NORMAL_DECIMALS, corner_groups, shade
+from .gather import borrow_at_vertex, NORMAL_DECIMALS, corner_groups, shade
 from .geometry import patch_extents, spatial_order
 from .hemicube import point_rows
 from .hierarchy import ElementTree, output_mesh
@@ -440,6 +440,7 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         C = leaf_scene.n_corners
         corner_value = np.zeros((C, 3))
         corner_value[ok] = group_value[groups.group[ok]]
+        corner_value = borrow_at_vertex(leaf_scene.corner_verts, groups.group >= 0, corner_value)
         step = dict(level=level, leaves=int(tree.leaves.shape[0]),
                     points=int(tree.points.shape[0]), gathered=int(go.size),
                     unlit=int(new.size - go.size))

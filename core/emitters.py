@@ -29,7 +29,7 @@ here grows with points x faces).
 
 import numpy as np
 
-from .exact import bilinear, point_polygon_form_factor
+from .exact import bilinear, gauss_square, pair_form_factor, point_polygon_form_factor
 from .geometry import patch_extents
 from .transfer import padded_polygons
 
@@ -54,6 +54,19 @@ AUTO_PIXELS = 2.0
 #: Shadow rays per (point, emitter) in the first round; where they and the anchor's all agree,
 #: no more are cast.
 FIRST_ROUND = 8
+
+#: A receiver patch nearer an emitter face than this many times its own diameter takes its
+#: unshadowed light from the emitter's side (:meth:`Emitters.near_patch_means`): a few Gauss
+#: points on the patch cannot follow a light that falls off over the gap (a 2 m ceiling patch
+#: 5 cm over a 0.6 m panel received 1.95 x the panel's power, tests/core/test_fuzz.py).
+NEAR_PATCH = 2.0
+
+#: Emitter-side integration: each emitter patch is cut into n x n cells (2 x 2 Gauss points
+#: each), n = its size over the gap to the receiver, within these bounds.
+NEAR_CELLS = (2, 12)
+
+#: (pair, point) evaluations of the contour integral per vectorised chunk.
+NEAR_CHUNK = 1 << 16
 
 #: Generator of the rank-1 (R2) lattice: the plastic number's powers (Roberts 2018).
 _PLASTIC = 1.3247179572447460
@@ -177,6 +190,92 @@ class Emitters:
             q = self._slot[e]
             out.append(np.where(self.sign[e] * side[:, q] > 0, np.pi * ff[:, q], 0.0))
         return out
+
+    def near_patch_means(self, patches, two_sided=True):
+        """Unshadowed ``pi F`` averaged over the receiver patches near each emitter, integrated
+        from the emitter's side.
+
+        The mean over a patch ``p`` of ``F(x -> E)`` is ``(1 / A_p) int_E F(dy -> p) dy``
+        (reciprocity of the point-to-area form factor). The inner ``F`` is the contour integral
+        over the whole patch, exact; the outer integral runs over the emitter's patches in cells
+        no larger than the gap (``NEAR_CELLS``). Whatever the outer rule, each point of the
+        emitter hands its light out over the receivers' polygons, which tile what it sees: near
+        the emitter its power is conserved by construction, where Gauss points on a receiver
+        overrate a light that falls off across it.
+
+        Parameters
+        ----------
+        patches : core.patches.Patches
+        two_sided : bool
+            Also the patches' back nodes (a point of the emitter behind a patch's plane lights
+            its back).
+
+        Returns
+        -------
+        light : (k,) int64
+            The light (index into this object's lights) of each near pair.
+        patch : (k,) int64
+        mean : (k, 2) float64
+            ``pi`` x the mean form factor over the patch from its front (column 0) and back
+            (column 1) node to the light's emitting side (column 1 is 0 without
+            ``two_sided``).
+        """
+        out_l, out_p, out_m = [], [], []
+        corners = np.asarray(patches.corners, dtype=np.float64)
+        P = corners.shape[0]
+        if not len(self) or self._pid.size == 0 or P == 0:
+            return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 2))
+        centres = corners.mean(axis=1)
+        radius = np.linalg.norm(corners - centres[:, None], axis=2).max(axis=1)
+        e_centre = self._corners.mean(axis=1)
+        e_radius = np.linalg.norm(self._corners - e_centre[:, None], axis=2).max(axis=1)
+        receives = np.ones(P, dtype=bool)
+        receives[self._pid] = False                 # an emitter's own patches: coplanar, F = 0
+        gu, gv, gw = gauss_square(2)
+        lo, hi = NEAR_CELLS
+        for e in range(len(self)):                  # per light: at most 2 x MAX_FACES
+            q = self._slot[e]
+            ks = np.arange(self._start[q], self._stop[q])
+            gaps = np.linalg.norm(centres[None] - e_centre[ks, None], axis=2) \
+                - radius[None] - e_radius[ks, None]                         # (K, P)
+            kk, pp = np.nonzero((gaps < NEAR_PATCH * 2.0 * radius[None]) & receives[None])
+            if kk.size == 0:
+                continue
+            gap = np.maximum(gaps[kk, pp], 0.0)
+            kk = ks[kk]
+            with np.errstate(divide="ignore"):
+                cells = np.ceil(2.0 * e_radius[kk] / gap)
+            cells = np.clip(np.nan_to_num(cells, nan=hi, posinf=hi), lo, hi).astype(np.int64)
+            acc = np.zeros((P, 2))
+            normal = self.sign[e] * self._normal[q]
+            for n in np.unique(cells):
+                rows = np.flatnonzero(cells == n)
+                i, j = np.divmod(np.arange(n * n), n)
+                u = ((i[:, None] + gu[None]) / n).ravel()
+                v = ((j[:, None] + gv[None]) / n).ravel()
+                w = np.tile(gw, n * n) / (n * n)
+                m = u.size
+                step = max(1, NEAR_CHUNK // m)
+                for a in range(0, rows.size, step):
+                    r = rows[a:a + step]
+                    y, jac = bilinear(self._corners[kk[r]], np.broadcast_to(u, (r.size, m)),
+                                      np.broadcast_to(v, (r.size, m)))
+                    p = np.repeat(pp[r], m)
+                    y = y.reshape(-1, 3)
+                    f = pair_form_factor(y, np.broadcast_to(normal, y.shape), corners[p]) \
+                        * (jac * w[None]).reshape(-1)
+                    back = np.einsum("ij,ij->i", y - centres[p], patches.normals[p]) < 0
+                    np.add.at(acc, (p, back.astype(np.int64)), f)
+            hit = np.unique(pp)
+            mean = np.pi * acc[hit] / np.asarray(patches.areas, dtype=np.float64)[hit, None]
+            if not two_sided:
+                mean[:, 1] = 0.0
+            out_l.append(np.full(hit.size, e))
+            out_p.append(hit)
+            out_m.append(mean)
+        if not out_l:
+            return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 2))
+        return np.concatenate(out_l), np.concatenate(out_p), np.concatenate(out_m)
 
     def _samples(self, q, shift, index):
         """Points (g, m, 3) on face slot ``q``: lattice points ``index`` (m,) turned by

@@ -95,7 +95,7 @@ def _clip_halfspace(r, h):
     return np.take_along_axis(slots, idx[..., None], axis=1), count
 
 
-def _pair_form_factor(x, n, polys):
+def pair_form_factor(x, n, polys):
     """Contour form factor for paired points and polygons.
 
     x : (M, 3) points; n : (M, 3) unit normals; polys : (M, K, 3). Returns (M,) float64.
@@ -173,7 +173,7 @@ def point_polygon_form_factor(points, normals, polygons):
         b = min(a + rows, s_count)
         i = np.repeat(np.arange(a, b), q_count)
         q = np.tile(np.arange(q_count), b - a)
-        out[a:b] = _pair_form_factor(x[i], n[i], polys[q]).reshape(b - a, q_count)
+        out[a:b] = pair_form_factor(x[i], n[i], polys[q]).reshape(b - a, q_count)
     return out
 
 
@@ -311,7 +311,7 @@ def _source_average(geo, patch, n, targets, order):
             ws = ws / ws.sum(axis=1, keepdims=True)
         xf = xs.reshape(-1, 3)
         tf = np.repeat(ta, k)
-        f = _pair_form_factor(xf, np.repeat(na, k, axis=0), geo.corners[tf]).reshape(mm, k)
+        f = pair_form_factor(xf, np.repeat(na, k, axis=0), geo.corners[tf]).reshape(mm, k)
         in_front = (np.einsum("mj,mj->m", xf - geo.centres[tf], geo.normals[tf]) > 0.0)
         in_front = in_front.reshape(mm, k)
         front[a:a + step] = (ws * f * in_front).sum(axis=1)

@@ -197,6 +197,29 @@ def gathered_colours(scene, groups, store, node_radiance, fallback, direct=None)
     return out
 
 
+def borrow_at_vertex(corner_verts, valid, values):
+    """``values`` (C, 3) with every corner that is not ``valid`` (C,) given the mean of the
+    valid corners at its vertex (unchanged where its vertex has none).
+
+    A face too thin to have a normal (a sliver that float64 rounding leaves in the conforming
+    mesh of a model far from the origin) gathers nothing; its corners would read black in the
+    written mesh, and a viewer draws that black along the sliver.
+    """
+    valid = np.asarray(valid, dtype=bool)
+    if valid.all():
+        return values
+    n_v = int(corner_verts.max()) + 1 if corner_verts.size else 0
+    total = np.zeros((n_v, values.shape[1]))
+    count = np.zeros(n_v)
+    np.add.at(total, corner_verts[valid], values[valid])
+    np.add.at(count, corner_verts[valid], 1.0)
+    out = values.copy()
+    bad = np.flatnonzero(~valid)
+    has = count[corner_verts[bad]] > 0
+    out[bad[has]] = total[corner_verts[bad[has]]] / count[corner_verts[bad[has]], None]
+    return out
+
+
 def _corner_wedges(scene, corners, faces):
     """(C, 3): every corner's angle bisector, inside its face, times the corner's angle (rad).
 

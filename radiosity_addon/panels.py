@@ -102,7 +102,8 @@ def draw_advanced(layout, props):
     _split_row(layout, "Solver").prop(props, "solver", text="")
     col = layout.column(align=True)
     col.active = props.output_mode == "MESH"
-    col.prop(props, "min_element")
+    col.prop(props, "min_element", text="Min Element (auto)" if props.min_element == 0
+             else "Min Element")
     col.prop(props, "vertex_budget")
     col = layout.column(align=True)
     col.prop(props, "tolerance")

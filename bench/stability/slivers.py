@@ -120,8 +120,10 @@ def run(ctx):
         worst=f"floor field {pct(worst[0])}, wall field {pct(worst[1])}, wall mean "
               f"{pct(worst[2])} (2 x seed noise: {pct(NOISE_FACTOR * noise[0])}, "
               f"{pct(NOISE_FACTOR * noise[1])}, {pct(NOISE_FACTOR * noise[2])})",
-        mitigation="none specific in the measured code (a mechanism is in progress): patch "
-                   "grids of the triangles as they come (`core/patches.py`)",
+        mitigation="gather points of corners moved along the corner's bisector, clear of "
+                   "both walls by the inset, not towards the sliver's centroid "
+                   "(`core/gather.py`); patch grids of the triangles as they come "
+                   "(`core/patches.py`); no setting",
         guards=[guard(g) for g in guards] or ["none yet"])
     sec.blocks += [
         "**Scene.** The room of class 2; each wall (4 × 2.5 m or 3 × 2.5 m) a fan of about n "
