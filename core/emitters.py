@@ -235,14 +235,9 @@ class Emitters:
         lo, hi = NEAR_CELLS
         for e in range(len(self)):                  # per light: at most 2 x MAX_FACES
             q = self._slot[e]
-            ks = np.arange(self._start[q], self._stop[q])
-            gaps = np.linalg.norm(centres[None] - e_centre[ks, None], axis=2) \
-                - radius[None] - e_radius[ks, None]                         # (K, P)
-            kk, pp = np.nonzero((gaps < NEAR_PATCH * 2.0 * radius[None]) & receives[None])
+            kk, pp, gap = self._near_pairs(q, centres, radius, e_centre, e_radius, receives)
             if kk.size == 0:
                 continue
-            gap = np.maximum(gaps[kk, pp], 0.0)
-            kk = ks[kk]
             with np.errstate(divide="ignore"):
                 cells = np.ceil(2.0 * e_radius[kk] / gap)
             cells = np.clip(np.nan_to_num(cells, nan=hi, posinf=hi), lo, hi).astype(np.int64)
@@ -276,6 +271,22 @@ class Emitters:
         if not out_l:
             return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 2))
         return np.concatenate(out_l), np.concatenate(out_p), np.concatenate(out_m)
+
+    def _near_pairs(self, q, centres, radius, e_centre, e_radius, receives):
+        """(emitter patch, receiver patch, gap) of face slot ``q``'s patches and the receivers
+        within ``NEAR_PATCH`` of their diameters (bounding spheres), in blocks of emitter
+        patches so that a large emitter's (K, P) distances never sit in memory at once."""
+        out = []
+        block = max(1, NEAR_CHUNK // max(centres.shape[0], 1))
+        for a in range(self._start[q], self._stop[q], block):
+            ks = np.arange(a, min(a + block, self._stop[q]))
+            d = centres[None] - e_centre[ks, None]
+            gaps = np.sqrt(np.einsum("kpj,kpj->kp", d, d)) - radius[None] - e_radius[ks, None]
+            k, p = np.nonzero((gaps < NEAR_PATCH * 2.0 * radius[None]) & receives[None])
+            out.append((ks[k], p, np.maximum(gaps[k, p], 0.0)))
+        if not out:
+            return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0)
+        return tuple(np.concatenate(a) for a in zip(*out))
 
     def _samples(self, q, shift, index):
         """Points (g, m, 3) on face slot ``q``: lattice points ``index`` (m,) turned by
