@@ -10,7 +10,7 @@ import numpy as np
 
 from core.adaptive import coarse_patch_size
 from core.patches import make_patches
-from core.settings import TABLE
+from core.settings import TABLE, BakeSettings
 
 from . import scenes
 from .common import DEFAULT_METHOD, chart, guard, methods, pct, secs, table
@@ -33,7 +33,8 @@ def corner_error(result, ref, keep):
 
 def scaled_settings(ctx, scene0, scale, **kw):
     """Every length setting (unit 'm') scaled; the auto patch size made explicit first."""
-    lengths = {row.name: row.default for row in TABLE if row.is_length}
+    resolved = BakeSettings()                  # auto lengths as the bake resolves them
+    lengths = {row.name: getattr(resolved, row.name) for row in TABLE if row.is_length}
     lengths["patch_size"] = coarse_patch_size(scene0)
     return ctx.settings(**{k: v * scale for k, v in lengths.items()}, **kw)
 
