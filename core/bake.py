@@ -130,7 +130,7 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     patches = make_patches(scene, settings.patch_size)
     if settings.output_mode == "mesh":
         patches = _split_near(scene, patches, settings.min_element,
-                                       settings.emitter_levels)
+                              settings.emitter_levels, level_monitor.check)
     contacts = on_contact = found = None
     if settings.contact_cuts:
         found = find_contacts(scene, patches)
@@ -149,13 +149,13 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     return result
 
 
-def _split_near(scene, patches, min_size, levels):
+def _split_near(scene, patches, min_size, levels, check=None):
     """Solve patches split where they are too large for their distance to an emitter, or for
-    the thin cavity they bound."""
+    the thin cavity they bound. ``check``: the bake's cancel check."""
     for _ in range(levels):
         emitting = np.any(np.asarray(scene.emission)[patches.material] > 0, axis=1)
         mask = near_emitter_mask(patches, emitting, min_size=min_size) \
-            | cavity_mask(patches, min_size=min_size)
+            | cavity_mask(patches, min_size=min_size, check=check)
         if not mask.any():
             break
         patches, _ = subdivide_patches(patches, mask)

@@ -393,7 +393,7 @@ def near_emitter_mask(patches, emitting, *, factor=NEAR_EMITTER_FACTOR, min_size
     return mask & (size > min_size)
 
 
-def cavity_mask(patches, *, factor=CAVITY_FACTOR, min_size=0.0):
+def cavity_mask(patches, *, factor=CAVITY_FACTOR, min_size=0.0, check=None):
     """Patches too wide for the thin cavity they bound (:data:`CAVITY_FACTOR`).
 
     Pairs (p, q) whose front normals are within 45 degrees of opposite, whose centres lie in
@@ -406,6 +406,8 @@ def cavity_mask(patches, *, factor=CAVITY_FACTOR, min_size=0.0):
     Parameters
     ----------
     patches : core.patches.Patches
+    check : callable, optional
+        Called between chunks (a bake's cancel check: 3,000 boxes take seconds here).
 
     Returns
     -------
@@ -423,6 +425,8 @@ def cavity_mask(patches, *, factor=CAVITY_FACTOR, min_size=0.0):
     # Chunks of neighbouring p; q is looked at only within reach of the chunk's bounding box
     # (a pair farther apart than the larger radius plus size / factor cannot qualify).
     for lo in range(0, cand.size, CAVITY_CHUNK):
+        if check is not None:
+            check()
         p = cand[lo:lo + CAVITY_CHUNK]
         reach = radius[p].max() + radius.max() + size[p].max() / factor
         box_lo, box_hi = centres[p].min(axis=0) - reach, centres[p].max(axis=0) + reach
