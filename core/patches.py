@@ -228,8 +228,7 @@ def make_patches(scene, max_edge):
     tri_len = np.linalg.norm(np.roll(tri_pts, -1, axis=1) - tri_pts, axis=2)
     tri_own = np.maximum(np.ceil(tri_len / h * (1.0 - tol.edge_count)), 1.0)
     fan = tri_own.min(axis=1) < tri_own.max(axis=1)
-    shortest = tri_len[fan].min(axis=1, keepdims=True)
-    k = np.argmax(tri_len[fan] <= shortest * (1.0 + tol.edge_tie), axis=1)
+    k = np.argmax(tri_len[fan] <= tri_len[fan].min(1, keepdims=True) * (1 + tol.edge_tie), 1)
     fan_loops = np.take_along_axis(tri_loops[fan], (k[:, None] + np.array([0, 1, 2, 2])) % 3, axis=1)
     n_plain = quad_loops.shape[0]
     quad_loops = np.concatenate([quad_loops, fan_loops])
