@@ -117,6 +117,7 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     if not isinstance(settings, BakeSettings):
         raise TypeError(f"settings must be a BakeSettings; got {type(settings).__name__}")
     t_start = time.perf_counter()
+    progress = _non_decreasing(progress)   # a second solve (flipped faces) starts over
     if settings.patch_size is None:
         settings = dataclasses.replace(settings, patch_size=0.5 if settings.output_mode == "vertices"
                                        else coarse_patch_size(scene))
@@ -127,20 +128,35 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     level_monitor.update(0.0, "patches")
     t0 = time.perf_counter()
     scene = merge_duplicates(scene)      # stability (issue 11): coincident faces solved as one
-    patches = make_patches(scene, settings.patch_size)
-    if settings.output_mode == "mesh":
-        patches = _split_near(scene, patches, settings.min_element,
-                              settings.emitter_levels, level_monitor.check)
-    contacts = on_contact = found = None
-    if settings.contact_cuts:
-        found = find_contacts(scene, patches)
-        patches, _, contacts = split_at_contacts(scene, patches, found)
-        on_contact = found.vertices
+    patches, found, contacts = _solve_patches(scene, settings, level_monitor.check)
     t_patches = time.perf_counter() - t0
     level_monitor.update(1.0, f"{len(patches.areas)} patches")
 
     result = _run(scene, settings, patches, level_monitor, t_start=t_start,
-                  timings={"patches": t_patches}, on_contact=on_contact, contact_lines=found)
+                  timings={"patches": t_patches}, contact_lines=found,
+                  on_contact=None if found is None else found.vertices)
+    # stability (issue 11): a thin cavity is found on the sides of its faces that face the room,
+    # and which side that is, the solve says (core.orient). When faces turned to the room
+    # bound a cavity that the faces as modelled did not, the patches are split as if the faces
+    # had been modelled the right way round and solved again (a second solve, in such files
+    # only).
+    flipped = getattr(result._state, "flipped", None)
+    if settings.output_mode == "mesh" and settings.two_sided and flipped is not None \
+            and flipped.any():
+        t0 = time.perf_counter()
+        again, found_again, contacts_again = _solve_patches(scene, settings, level_monitor.check,
+                                                            turn=flipped)
+        if again.areas.size != patches.areas.size:
+            patches, found, contacts = again, found_again, contacts_again
+            first = t0 - t_start
+            result = _run(scene, settings, patches, level_monitor, t_start=t_start,
+                          timings={"patches": t_patches + time.perf_counter() - t0},
+                          contact_lines=found,
+                          on_contact=None if found is None else found.vertices)
+            result.report["solved_twice"] = (f"flipped faces bound thin cavities: solved again "
+                                             f"on {patches.areas.size} patches (the first "
+                                             f"solve took {first:.1f} s)")
+    on_contact = None if found is None else found.vertices
     if levels:
         result = _refine(scene, settings, patches, result, on_contact, progress, cancel,
                          t_start, found)
@@ -149,13 +165,42 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     return result
 
 
-def _split_near(scene, patches, min_size, levels, check=None):
+def _non_decreasing(progress):
+    """``progress`` (or None) that never reports a fraction below one it reported."""
+    if progress is None:
+        return None
+    top = [0.0]
+
+    def report(fraction, message):
+        top[0] = max(top[0], fraction)
+        progress(top[0], message)
+    return report
+
+
+def _solve_patches(scene, settings, check, turn=None):
+    """The solve's patches: the grid, the near-emitter and cavity splits ('mesh' output; the
+    faces of ``turn`` (F,) bool taken the other way round), the contact cuts. Returns
+    ``(patches, found contacts or None, the contacts' report or None)``."""
+    patches = make_patches(scene, settings.patch_size)
+    if settings.output_mode == "mesh":
+        patches = _split_near(scene, patches, settings.min_element, settings.emitter_levels,
+                              check, settings.two_sided, turn)
+    found = contacts = None
+    if settings.contact_cuts:
+        found = find_contacts(scene, patches)
+        patches, _, contacts = split_at_contacts(scene, patches, found)
+    return patches, found, contacts
+
+
+def _split_near(scene, patches, min_size, levels, check=None, two_sided=True, turn=None):
     """Solve patches split where they are too large for their distance to an emitter, or for
-    the thin cavity they bound. ``check``: the bake's cancel check."""
+    the thin cavity they bound. ``check``: the bake's cancel check; ``two_sided``: the bake's;
+    ``turn``: (F,) bool, faces whose back faces the room (:func:`core.criteria.cavity_mask`)."""
     for _ in range(levels):
         emitting = np.any(np.asarray(scene.emission)[patches.material] > 0, axis=1)
         mask = near_emitter_mask(patches, emitting, min_size=min_size) \
-            | cavity_mask(patches, min_size=min_size, check=check)
+            | cavity_mask(patches, min_size=min_size, check=check, two_sided=two_sided,
+                          turn=None if turn is None else turn[patches.face])
         if not mask.any():
             break
         patches, _ = subdivide_patches(patches, mask)

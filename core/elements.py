@@ -22,7 +22,7 @@ import numpy as np
 from .gather import shade
 from .hemicube import point_rows
 from .patches import subdivide_patches
-from .refine import refine_mask
+from .refine import lit_mean, refine_mask
 from .rows import RowStore, compact_rows
 
 
@@ -36,7 +36,8 @@ class Elements:
     parent : (E,) int64
         Solved patch each element lies in.
     computed : (K,) int64
-        Elements whose radiance was gathered at their centre (the rest copy their patch's).
+        Element nodes (front e, back e + E) whose radiance was gathered at their centre (the
+        rest copy their patch's side).
     rows : core.rows.RowStore
         Point-to-node form factors (against the solved patches' 2P nodes) of ``computed``, in
         that order.
@@ -55,8 +56,7 @@ class Elements:
     def node_radiance(self, scene, node_radiance):
         """Radiance of the elements' 2E nodes from the solved patches' (2P, 3) node radiance.
 
-        Front: gathered for ``computed`` elements, the patch's own value for the others. Back:
-        the patch's back value (a back side is seen rarely, and never lit by the split's cause).
+        Gathered for the ``computed`` nodes, the patch's own side's value for the others.
         """
         L = np.asarray(node_radiance, dtype=np.float64)
         P = L.shape[0] // 2
@@ -68,8 +68,17 @@ class Elements:
             incident = self.rows.incident(L)
             if self.direct is not None:
                 incident = incident + self.direct
-            out[self.computed] = shade(scene, self.patches.material[self.computed], incident)
+            node = self.computed
+            out[node] = shade_side(scene, self.patches.material[node % E], node >= E, incident)
         return out
+
+
+def shade_side(scene, material, back, incident):
+    """:func:`core.gather.shade` on either side: ``back`` (n,) bool takes the back materials."""
+    back_rho, back_le = (np.asarray(a, dtype=np.float64) for a in scene.back_materials())
+    front = shade(scene, material, incident)
+    return np.where(np.asarray(back)[:, None], back_le[material] + back_rho[material] * incident,
+                    front)
 
 
 def _survivors(mask, parent):
@@ -118,53 +127,68 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
         raise ValueError(f"node_radiance must have shape (2P, 3) = ({2 * P}, 3); got {L.shape}")
     if not isinstance(levels, (int, np.integer)) or levels < 0:
         raise ValueError(f"levels must be an int >= 0; got {levels!r}")
-    emission = np.asarray(scene.emission)
+    # Both sides: a face whose room side is its back (flipped normals, core.orient) or a
+    # partition lit on both sides is split where its lit side's light changes. One dark floor
+    # for both (the brighter side's mean), so a flipped room splits as the room as modelled.
+    side_le = (np.asarray(scene.emission), np.asarray(scene.back_materials()[1]))
     elements = patches
     parent = np.arange(P, dtype=np.int64)          # solved patch of every element
-    front = L[:P].copy()                           # current front radiance of every element
-    kept = []                                      # (element ids, cols, vals, direct) gathered
+    seen = [L[:P].copy(), L[P:].copy()]            # current radiance of each side of every element
+    emits = [np.any(le[patches.material] > 0, axis=1) for le in side_le]
+    mean = max(lit_mean(patches, seen[s], emits[s]) for s in (0, 1))
+    kept = []                                      # (element ids, side, cols, vals, direct)
     steps = []
     for level in range(levels):
-        emitting = np.any(emission[elements.material] > 0, axis=1)
-        mask = refine_mask(elements, front, emitting, threshold=threshold,
-                           crease_angle=crease_angle)
+        masks = [refine_mask(elements, seen[s], np.any(side_le[s][elements.material] > 0, axis=1),
+                             threshold=threshold, crease_angle=crease_angle, mean=mean)
+                 for s in (0, 1)]
+        mask = masks[0] | masks[1]
         if not mask.any():
             break
         elements, split_parent = subdivide_patches(elements, mask)
         remap = _survivors(mask, split_parent)
         remapped = []
-        for ids, cols, vals, dl in kept:          # per batch of rows, not per element
+        for ids, side, cols, vals, dl in kept:    # per batch of rows, not per element
             ids = remap[ids]
             ok = ids >= 0
-            remapped.append((ids[ok], cols, vals[ok], dl[ok]))
+            remapped.append((ids[ok], side, cols, vals[ok], dl[ok]))
         kept = remapped
         parent = parent[split_parent]
-        front = front[split_parent]
+        seen = [v[split_parent] for v in seen]
         new = np.flatnonzero(mask[split_parent])
         steps.append(dict(split=int(mask.sum()), elements=int(parent.size)))
-        for s in range(0, new.size, batch):
-            ids = new[s:s + batch]
-            rows = point_rows(patches, elements.centres[ids], elements.normals[ids],
-                              resolution=resolution, rotate=rotate, rng=rng)
-            cols, vals = compact_rows(rows)
-            dl = np.zeros((ids.size, 3)) if direct is None else \
-                direct.extra(elements.centres[ids], elements.normals[ids], rows.sum(axis=1))
-            kept.append((ids, cols, vals, dl))
-            front[ids] = shade(scene, elements.material[ids],
-                               vals.astype(np.float64) @ L[cols] + dl)
-            if monitor is not None:
-                monitor.update((level + (s + ids.size) / new.size) / levels,
-                               f"elements: level {level + 1}, {parent.size} elements")
+        todo = [(s, new[masks[s][split_parent[new]]]) for s in (0, 1)]
+        total = max(sum(t.size for _, t in todo), 1)
+        done = 0
+        for side, ids_side in todo:
+            sign = -1.0 if side else 1.0
+            for b in range(0, ids_side.size, batch):
+                ids = ids_side[b:b + batch]
+                normals = sign * elements.normals[ids]
+                rows = point_rows(patches, elements.centres[ids], normals,
+                                  resolution=resolution, rotate=rotate, rng=rng)
+                cols, vals = compact_rows(rows)
+                dl = np.zeros((ids.size, 3)) if direct is None else \
+                    direct.extra(elements.centres[ids], normals, rows.sum(axis=1))
+                kept.append((ids, side, cols, vals, dl))
+                seen[side][ids] = shade_side(scene, elements.material[ids],
+                                             np.full(ids.size, bool(side)),
+                                             vals.astype(np.float64) @ L[cols] + dl)
+                done += ids.size
+                if monitor is not None:
+                    monitor.update((level + done / total) / levels,
+                                   f"elements: level {level + 1}, {parent.size} elements")
     # Rows kept in the order of ``computed`` (the store's row keys are positions in it).
-    computed = np.concatenate([k[0] for k in kept]) if kept else np.zeros(0, np.int64)
+    E = parent.size
+    computed = np.concatenate([k[0] + k[1] * E for k in kept]) if kept else np.zeros(0, np.int64)
     store = RowStore(computed.size, 2 * P)
     start = 0
-    for ids, cols, vals, _ in kept:
+    for ids, _, cols, vals, _ in kept:
         store.add_compact(np.arange(start, start + ids.size), cols, vals)
         start += ids.size
     at_centres = None
     if direct is not None:
-        at_centres = np.concatenate([k[3] for k in kept]) if kept else np.zeros((0, 3))
+        at_centres = np.concatenate([k[4] for k in kept]) if kept else np.zeros((0, 3))
     return Elements(elements, parent, computed, store, steps, at_centres)
 
 

@@ -23,8 +23,16 @@ DARK_FLOOR = 0.5
 
 
 
+def lit_mean(patches, patch_radiance, emitting):
+    """Area-weighted mean luminance of the non-emitting patches (0 when there are none)."""
+    y = np.asarray(patch_radiance, dtype=np.float64) @ LUMINANCE
+    emitting = np.asarray(emitting, dtype=bool)
+    a_lit = patches.areas[~emitting]
+    return float((a_lit * y[~emitting]).sum() / a_lit.sum()) if a_lit.sum() > 0 else 0.0
+
+
 def refine_mask(patches, patch_radiance, emitting, *, threshold=0.1, crease_angle=30.0,
-                min_area=0.0):
+                min_area=0.0, mean=None):
     """Mark patches whose light differs from a smooth neighbour's by more than ``threshold``.
 
     Parameters
@@ -40,6 +48,10 @@ def refine_mask(patches, patch_radiance, emitting, *, threshold=0.1, crease_angl
         Degrees: neighbours whose normals differ by more are a different surface (not compared).
     min_area : float
         Patches of this area or less are never marked (the refinement's floor).
+    mean : float, optional
+        The luminance :data:`DARK_FLOOR` is a fraction of (default: :func:`lit_mean` of
+        ``patch_radiance``; a back side's elements pass their scene's, see
+        :mod:`core.elements`).
 
     Returns
     -------
@@ -57,8 +69,8 @@ def refine_mask(patches, patch_radiance, emitting, *, threshold=0.1, crease_angl
     if P == 0:
         return np.zeros(0, dtype=bool)
     y = L @ LUMINANCE
-    a_lit = patches.areas[~emitting]
-    mean = float((a_lit * y[~emitting]).sum() / a_lit.sum()) if a_lit.sum() > 0 else 0.0
+    if mean is None:
+        mean = lit_mean(patches, L, emitting)
     floor = DARK_FLOOR * mean if mean > 0 else 1e-300
 
     # Corner points shared by patches: quantised positions -> point ids.
