@@ -26,7 +26,8 @@ from .contacts import find_contacts, split_at_contacts
 from .criteria import cavity_mask, face_variation, near_emitter_mask, unlit_late_nodes
 from .emitters import Emitters, exact_materials
 from .lights import DirectLight
-from .duplicates import duplicate_warning, fill_duplicate_colours, merge_duplicates
+from .duplicates import (duplicate_warning, fill_duplicate_colours, merge_duplicates,
+                         near_duplicate_warning)
 from .orient import orient
 from .patches import make_patches, subdivide_patches
 from .pipeline import (check_result, colours, form_factors, make_gather, node_arrays, solve,
@@ -406,7 +407,8 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     checks, energy, n_dropped = check_result(scene, patches, oriented, side.open_back)
     if side.flipped.any():   # stability (issue 11): the flipped faces are baked on the lit side
         checks = [w for w in checks if not w.endswith("on their back side: check normals")]
-    checks += [w for w in [duplicate_warning(scene), side.warning()] if w]
+    checks += [w for w in [duplicate_warning(scene), near_duplicate_warning(scene),
+                           side.warning()] if w]
     report = dict(
         patches=P,
         nodes_active=int(np.count_nonzero(sol.active)),

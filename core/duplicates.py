@@ -24,6 +24,12 @@ from .contacts import _box_pairs
 #: Corners of two duplicate faces coincide within this fraction of the face size (sqrt area).
 DUPLICATE_RTOL = 1e-4
 
+#: Copies of a face facing the same way, farther apart than DUPLICATE_RTOL but within this
+#: fraction of its size, are solved as the thin gap between two surfaces (light enters it from
+#: the edges) and named in a warning: most often a surface left twice by an import, offset a
+#: little. Faces back to back (a pane's or a door's two sides) are not named.
+NEAR_DUPLICATE_RTOL = 1e-2
+
 #: Objects named in the warning at most (then "and N more").
 MAX_NAMED = 5
 
@@ -199,3 +205,27 @@ def copy_duplicate_faces(scene, mesh):
         corner_sources=np.concatenate(parts["corner_sources"]),
         corner_weights=np.concatenate(parts["corner_weights"]))
     return out, np.concatenate(parts["source"])
+
+
+def near_duplicate_warning(scene, *, rtol=NEAR_DUPLICATE_RTOL):
+    """The report's warning naming faces with a copy facing the same way within ``rtol`` x
+    their size that is not a duplicate (:func:`find_duplicates`), or None."""
+    near = find_duplicates(scene, rtol=rtol)
+    faces = np.flatnonzero(near >= 0)
+    if faces.size == 0:
+        return None
+    same = np.einsum("ij,ij->i", scene.face_normals[faces], scene.face_normals[near[faces]]) > 0
+    faces = faces[same]
+    if faces.size == 0:
+        return None
+    kept = near[faces]
+    objs = np.unique(np.concatenate([scene.face_objects[faces], scene.face_objects[kept]]))
+    names = [f'"{scene.object_names[o]}"' for o in objs[:MAX_NAMED]]
+    more = f" and {objs.size - MAX_NAMED} more" if objs.size > MAX_NAMED else ""
+    f, g = int(faces[0]), int(kept[0])
+    gap = float(np.linalg.norm(_face_corners(scene, np.array([f])).mean(axis=1)
+                               - _face_corners(scene, np.array([g])).mean(axis=1)))
+    return (f"{faces.size} faces lie {gap:.3g} m or so from a copy of themselves facing the "
+            f"same way (e.g. {scene.face_label(f)} and {scene.face_label(g)}) in objects "
+            f"{', '.join(names)}{more}: solved as the thin gap between two surfaces; if one is "
+            f"a leftover copy, delete it")

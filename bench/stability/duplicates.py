@@ -8,7 +8,7 @@ floor; walls, ceiling and box as they are.
 import importlib
 from contextlib import contextmanager
 
-from core.duplicates import DUPLICATE_RTOL
+from core.duplicates import DUPLICATE_RTOL, NEAR_DUPLICATE_RTOL
 
 from . import scenes
 from .common import chart, guard, pct, secs, surface_errors, surface_means, table
@@ -73,7 +73,8 @@ def run(ctx):
                 means = surface_means(r.result, scene, groups, OTHERS + ("copy",))
                 err = surface_errors(means, refs[0], pairs)
                 data[label, merged, rel] = err
-                warned = any("duplicate" in w for w in r.result.report["warnings"])
+                warned = any("duplicate" in w or "copy of themselves" in w
+                             for w in r.result.report["warnings"])
                 rows.append([label, f"{rel:g}", "yes" if merged else "removed",
                              r.result.report["patches"], pct(err[0]), pct(err[1]),
                              "yes" if warned else "no", secs(r.seconds)])
@@ -112,7 +113,9 @@ def run(ctx):
               f"{pct(NOISE_FACTOR * noise[1])})",
         mitigation="coincident faces (corners within `DUPLICATE_RTOL` = "
                    f"{DUPLICATE_RTOL:g} x size) solved as one, copies take the kept face's "
-                   "colours (`core/duplicates.py`; no setting)",
+                   "colours; copies facing the same way within `NEAR_DUPLICATE_RTOL` = "
+                   f"{NEAR_DUPLICATE_RTOL:g} x size named in a warning (`core/duplicates.py`; "
+                   "no setting)",
         guards=[guard("tests/core/test_duplicates.py")])
     sec.blocks += [
         "**Scene.** A 4 × 3 × 2.5 m room (walls one quad each), a 1 m box on the floor, a 1 m "
@@ -135,5 +138,7 @@ def run(ctx):
         f"{pct(worst)}. Without the merge the coincident copy (offset 0) gives "
         + (", ".join(pct(e) for e in removed) or "–")
         + f" on the room mean. Past `DUPLICATE_RTOL` the copy is a surface of its own over a "
-          "thin cavity (the patches column shows the cavity split of the radiosity mesh).")
+          "thin cavity (the patches column shows the cavity split of the radiosity mesh); "
+          "within `NEAR_DUPLICATE_RTOL` a copy facing the same way is named in the report "
+          "('warned').")
     return sec

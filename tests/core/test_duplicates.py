@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from core.bake import bake
-from core.duplicates import DUPLICATE_RTOL, find_duplicates
+from core.duplicates import (DUPLICATE_RTOL, NEAR_DUPLICATE_RTOL, find_duplicates,
+                             near_duplicate_warning)
 from core.scene import scene_from_polygons
 from core.settings import BakeSettings
 
@@ -96,6 +97,31 @@ def test_near_copy_is_not_a_duplicate():
     """A floor copy 1 % of its size above the floor is a separate surface: not merged."""
     scene = _room([(FLOOR + [0, 0, 0.01 * np.sqrt(12.0)], "Floor.001")])
     assert np.all(find_duplicates(scene) < 0)
+
+
+def test_near_copy_facing_the_same_way_is_named_in_a_warning():
+    """A floor copy 0.1 % of its size above the floor (3.5 mm: a surface left twice by an
+    import, offset) is solved as a thin gap, and the report names both objects and the gap."""
+    lift = 1e-3 * np.sqrt(12.0)
+    scene = _room([(FLOOR + [0, 0, lift], "Floor.001")])
+    res = bake(scene, SETTINGS)
+    warn = [w for w in res.report["warnings"] if "copy of themselves" in w]
+    assert len(warn) == 1 and '"Floor"' in warn[0] and '"Floor.001"' in warn[0]
+    assert warn[0].startswith(f"1 faces lie {lift:.3g} m or so")
+    assert not any("duplicates" in w for w in res.report["warnings"])
+
+
+def test_back_to_back_faces_are_not_named():
+    """A pane's two sides (the same quad, 1 % of its size apart, wound opposite ways) are a
+    thin solid, not a leftover copy; copies farther apart than NEAR_DUPLICATE_RTOL are
+    separate surfaces."""
+    pane = FLOOR + [0, 0, 1.0]
+    thin = _room([(pane, "Pane"), ((pane + [0, 0, 0.01 * np.sqrt(12.0)])[::-1], "Pane")])
+    assert near_duplicate_warning(thin) is None
+    far = _room([(FLOOR + [0, 0, 2 * NEAR_DUPLICATE_RTOL * np.sqrt(12.0)], "Floor.001")])
+    assert near_duplicate_warning(far) is None
+    near = _room([(FLOOR + [0, 0, 0.5 * NEAR_DUPLICATE_RTOL * np.sqrt(12.0)], "Floor.001")])
+    assert '"Floor.001"' in near_duplicate_warning(near)
 
 
 def test_duplicate_groups_keep_the_lowest_face():
