@@ -357,11 +357,11 @@ def _check_exact_power(data, rho, em, emitters, clear=False):
 def test_closed_room_exact_emitters_lose_no_power(data, rho, em):
     """Closed room lit by a hung panel clear of the furniture, emitters lit exactly ('all'):
     nothing escapes, so ``escaped`` is zero and ``absorbed`` is the emitted power. Oracle: the
-    geometry (closed), not the engine. (Emitters touching or piercing a solid: next test.) (A lit wall sends its outer side's light into the void, and is over the
-    emitters' area share: the first property covers it.) (Found
-    here: 2 m ceiling patches 5 cm over a 0.6 m panel received 1.95 x its power from 3 x 3 Gauss
-    points each; patches near an emitter now integrate from the emitter's side,
-    core.emitters.Emitters.near_patch_means.)"""
+    geometry (closed), not the engine. (Emitters touching or piercing a solid: next test. A
+    lit wall sends its outer side's light into the void, and is over the emitters' area share:
+    the first property covers it.) (Found here: 2 m ceiling patches 5 cm over a 0.6 m panel
+    received 1.95 x its power from 3 x 3 Gauss points each; patches near an emitter now
+    integrate from the emitter's side, core.emitters.Emitters.near_patch_means.)"""
     _check_exact_power(data, rho, em, ("panel",), clear=True)
 
 
