@@ -137,16 +137,15 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
                   timings={"patches": t_patches}, contact_lines=found,
                   on_contact=None if found is None else found.vertices)
     # stability (issue 11): a thin cavity is found on the sides of its faces that face the room,
-    # and which side that is, the solve says (core.orient). When faces turned to the room
-    # bound a cavity that the faces as modelled did not, the patches are split as if the faces
-    # had been modelled the right way round and solved again (a second solve, in such files
-    # only).
+    # and which side that is, the solve says (core.orient). When the backs of the faces lit from
+    # behind bound cavities that the fronts did not (a flipped floor under a shelf), the
+    # patches are split there too and solved again (a second solve, in such files only).
     flipped = getattr(result._state, "flipped", None)
     if settings.output_mode == "mesh" and settings.two_sided and flipped is not None \
             and flipped.any():
         t0 = time.perf_counter()
         again, found_again, contacts_again = _solve_patches(scene, settings, level_monitor.check,
-                                                            turn=flipped)
+                                                            back_open=flipped)
         if again.areas.size != patches.areas.size:
             patches, found, contacts = again, found_again, contacts_again
             first = t0 - t_start
@@ -178,14 +177,14 @@ def _non_decreasing(progress):
     return report
 
 
-def _solve_patches(scene, settings, check, turn=None):
+def _solve_patches(scene, settings, check, back_open=None):
     """The solve's patches: the grid, the near-emitter and cavity splits ('mesh' output; the
-    faces of ``turn`` (F,) bool taken the other way round), the contact cuts. Returns
+    backs of ``back_open`` (F,) bool faces bound cavities too), the contact cuts. Returns
     ``(patches, found contacts or None, the contacts' report or None)``."""
     patches = make_patches(scene, settings.patch_size)
     if settings.output_mode == "mesh":
         patches = _split_near(scene, patches, settings.min_element, settings.emitter_levels,
-                              check, settings.two_sided, turn)
+                              check, back_open)
     found = contacts = None
     if settings.contact_cuts:
         found = find_contacts(scene, patches)
@@ -193,15 +192,15 @@ def _solve_patches(scene, settings, check, turn=None):
     return patches, found, contacts
 
 
-def _split_near(scene, patches, min_size, levels, check=None, two_sided=True, turn=None):
+def _split_near(scene, patches, min_size, levels, check=None, back_open=None):
     """Solve patches split where they are too large for their distance to an emitter, or for
-    the thin cavity they bound. ``check``: the bake's cancel check; ``two_sided``: the bake's;
-    ``turn``: (F,) bool, faces whose back faces the room (:func:`core.criteria.cavity_mask`)."""
+    the thin cavity they bound. ``check``: the bake's cancel check; ``back_open``: (F,) bool,
+    faces whose back bounds cavities too (:func:`core.criteria.cavity_mask`)."""
     for _ in range(levels):
         emitting = np.any(np.asarray(scene.emission)[patches.material] > 0, axis=1)
         mask = near_emitter_mask(patches, emitting, min_size=min_size) \
-            | cavity_mask(patches, min_size=min_size, check=check, two_sided=two_sided,
-                          turn=None if turn is None else turn[patches.face])
+            | cavity_mask(patches, min_size=min_size, check=check, emitting=emitting,
+                          back_open=None if back_open is None else back_open[patches.face])
         if not mask.any():
             break
         patches, _ = subdivide_patches(patches, mask)
