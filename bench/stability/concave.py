@@ -92,8 +92,8 @@ def run(ctx):
         for i in (0, 1, 3):
             series.append((f"{LABELS[i]}, {form}", reflex,
                            [data[k, convex][i] if (k, convex) in data else None for k in ks]))
-    chart(ctx.images / name, "Floor and ceiling as one concave polygon or as convex pieces, "
-          "against the refined room", "reflex corners of the floor (1: an L; combs of 2, 3 "
+    chart(ctx.images / name, "Concave floor and ceiling: one polygon or convex pieces",
+          "reflex corners of the floor (1: an L; combs of 2, 3 "
           "teeth: 3, 5)", "|error| against the refined convex room (%)", series, percent=True)
     # The concave form's excess over the convex form's own discretisation error.
     excess = [max(data[k, False][i] - data[k, True][i] for k in ks
