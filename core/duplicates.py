@@ -24,10 +24,10 @@ from .contacts import _box_pairs
 #: Corners of two duplicate faces coincide within this fraction of the face size (sqrt area).
 DUPLICATE_RTOL = 1e-4
 
-#: Copies of a face facing the same way, farther apart than DUPLICATE_RTOL but within this
-#: fraction of its size, are solved as the thin gap between two surfaces (light enters it from
-#: the edges) and named in a warning: most often a surface left twice by an import, offset a
-#: little. Faces back to back (a pane's or a door's two sides) are not named.
+#: Copies of a face (facing the same way, or facing it), farther apart than DUPLICATE_RTOL but
+#: within this fraction of its size, are solved as the thin gap between two surfaces (light
+#: enters it from the edges) and named in a warning: most often a surface left twice by an
+#: import, offset a little. Faces back to back (a pane's or a door's two sides) are not named.
 NEAR_DUPLICATE_RTOL = 1e-2
 
 #: Objects named in the warning at most (then "and N more").
@@ -207,15 +207,30 @@ def copy_duplicate_faces(scene, mesh):
     return out, np.concatenate(parts["source"])
 
 
+def _face_corners_any(scene, faces):
+    """(n, 3) centroids of faces with any numbers of corners."""
+    out = np.zeros((len(faces), 3))
+    for i, f in enumerate(faces):      # a warning's few faces, not a hot path
+        s, k = scene.face_starts[f], scene.face_sizes[f]
+        out[i] = scene.vertices[scene.corner_verts[s:s + k]].mean(axis=0)
+    return out
+
+
 def near_duplicate_warning(scene, *, rtol=NEAR_DUPLICATE_RTOL):
-    """The report's warning naming faces with a copy facing the same way within ``rtol`` x
-    their size that is not a duplicate (:func:`find_duplicates`), or None."""
+    """The report's warning naming faces with a copy within ``rtol`` x their size, facing the
+    same way or facing them, that is not a duplicate (:func:`find_duplicates`), or None."""
     near = find_duplicates(scene, rtol=rtol)
     faces = np.flatnonzero(near >= 0)
     if faces.size == 0:
         return None
-    same = np.einsum("ij,ij->i", scene.face_normals[faces], scene.face_normals[near[faces]]) > 0
-    faces = faces[same]
+    # Kept: copies facing the same way, or facing each other (a flipped copy over the floor);
+    # not faces back to back (a pane's two sides, each facing away from the other).
+    n_f, n_g = scene.face_normals[faces], scene.face_normals[near[faces]]
+    c_f = _face_corners_any(scene, faces)
+    c_g = _face_corners_any(scene, near[faces])
+    same = np.einsum("ij,ij->i", n_f, n_g) > 0
+    facing = np.einsum("ij,ij->i", c_g - c_f, n_f) > 0
+    faces = faces[same | facing]
     if faces.size == 0:
         return None
     kept = near[faces]
@@ -225,7 +240,6 @@ def near_duplicate_warning(scene, *, rtol=NEAR_DUPLICATE_RTOL):
     f, g = int(faces[0]), int(kept[0])
     gap = float(np.linalg.norm(_face_corners(scene, np.array([f])).mean(axis=1)
                                - _face_corners(scene, np.array([g])).mean(axis=1)))
-    return (f"{faces.size} faces lie {gap:.3g} m or so from a copy of themselves facing the "
-            f"same way (e.g. {scene.face_label(f)} and {scene.face_label(g)}) in objects "
+    return (f"{faces.size} faces lie {gap:.3g} m or so from a copy of themselves (e.g. {scene.face_label(f)} and {scene.face_label(g)}) in objects "
             f"{', '.join(names)}{more}: solved as the thin gap between two surfaces; if one is "
             f"a leftover copy, delete it")

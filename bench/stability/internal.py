@@ -102,7 +102,7 @@ def run(ctx):
                      len(r.result.report["warnings"]), secs(r.seconds)])
     name = "stability_internal.png"
     xs = list(range(len(placements)))
-    ticks = (xs, [f"{p[0]:g}×, {np.linalg.norm(np.asarray(p[2]) * p[0]):.3g} m"
+    ticks = (xs, [f"{p[0]:g}×\n{np.linalg.norm(np.asarray(p[2]) * p[0]):.3g} m"
                   for p in placements])
     chart(ctx.images / name, "Office furnace (every surface emits and reflects 0.5) against "
           "Le / (1 − rho)", "placement (scale, distance from the origin)",

@@ -18,11 +18,12 @@ from .report import Section
 
 NOISE_FACTOR = 2.0
 
-#: Flipped sets, growing: (label, groups whose faces are flipped, or a count of box faces).
+#: Flipped sets, growing: (label, groups whose faces are flipped, or (group, indices of its
+#: faces); the box's faces: bottom, top, then its sides, scenes.Builder.box).
 SETS = (("none", ()), ("floor", ("floor",)), ("floor, a wall, the box top", ("floor", "wall x1",
-                                                                           ("box", 1))),
+                                                                           ("box", (1,)))),
         ("ceiling, 2 walls, a box side, the lamp", ("ceiling", "wall y0", "wall y1",
-                                                     ("box", 2), "lamp")),
+                                                     ("box", (2,)), "lamp")),
         ("every face", ("floor", "ceiling", "wall y0", "wall x1", "wall y1", "wall x0", "box",
                         "lamp")))
 
@@ -41,8 +42,8 @@ def flip(scene, faces):
 def faces_of(groups, spec):
     out = []
     for item in spec:
-        name, n = item if isinstance(item, tuple) else (item, None)
-        out += list(groups[name][:n] if n else groups[name])
+        name, which = item if isinstance(item, tuple) else (item, None)
+        out += [groups[name][i] for i in which] if which else list(groups[name])
     return out
 
 

@@ -112,12 +112,16 @@ def test_near_copy_facing_the_same_way_is_named_in_a_warning():
 
 
 def test_back_to_back_faces_are_not_named():
-    """A pane's two sides (the same quad, 1 % of its size apart, wound opposite ways) are a
-    thin solid, not a leftover copy; copies farther apart than NEAR_DUPLICATE_RTOL are
+    """A pane's two sides (the same quad 0.5 % of its size apart, back to back: the lower one
+    facing down, the upper one up) are a thin solid, not a leftover copy; a flipped copy over
+    the floor (facing it) is named; copies farther apart than NEAR_DUPLICATE_RTOL are
     separate surfaces."""
     pane = FLOOR + [0, 0, 1.0]
-    thin = _room([(pane, "Pane"), ((pane + [0, 0, 0.01 * np.sqrt(12.0)])[::-1], "Pane")])
+    lift = [0, 0, 0.5 * NEAR_DUPLICATE_RTOL * np.sqrt(12.0)]
+    thin = _room([(pane[::-1], "Pane"), (pane + lift, "Pane")])
     assert near_duplicate_warning(thin) is None
+    facing = _room([((FLOOR + lift)[::-1], "Floor.001")])
+    assert '"Floor.001"' in near_duplicate_warning(facing)
     far = _room([(FLOOR + [0, 0, 2 * NEAR_DUPLICATE_RTOL * np.sqrt(12.0)], "Floor.001")])
     assert near_duplicate_warning(far) is None
     near = _room([(FLOOR + [0, 0, 0.5 * NEAR_DUPLICATE_RTOL * np.sqrt(12.0)], "Floor.001")])
