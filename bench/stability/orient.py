@@ -96,7 +96,8 @@ def run(ctx):
           "worst face |error| / room mean (%)",
           [(f"output_mode='{m}'" + (" (default)" if m == "mesh" else ""), counts,
             [data.get((m, n)) for n in counts]) for m in modes],
-          hlines=[(NOISE_FACTOR * noise[m], f"2 x seed noise, {m}") for m in modes])
+          hlines=[(NOISE_FACTOR * noise[m], f"2 x seed noise, {m}") for m in modes],
+          percent=True)
     default = [data[k] for k in data if k[0] == "mesh"]
     worst = max(default) if default else float("nan")
     sec = Section(
