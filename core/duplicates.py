@@ -60,10 +60,7 @@ def find_duplicates(scene, *, rtol=DUPLICATE_RTOL):
     valid = np.flatnonzero(scene.face_valid)
     if valid.size < 2:
         return duplicate_of
-    corners, _ = scene.face_corner_indices()
-    first = np.cumsum(scene.face_sizes) - scene.face_sizes
-    pos_all = scene.vertices[scene.corner_verts[corners]]
-    centroid = (np.add.reduceat(pos_all, first, axis=0) / scene.face_sizes[:, None])[valid]
+    centroid = _centroids(scene)[valid]
     size = np.sqrt(scene.face_areas[valid])
     reach = rtol * size
     extent = np.ptp(centroid, axis=0).max()
@@ -207,13 +204,12 @@ def copy_duplicate_faces(scene, mesh):
     return out, np.concatenate(parts["source"])
 
 
-def _face_corners_any(scene, faces):
-    """(n, 3) centroids of faces with any numbers of corners."""
-    out = np.zeros((len(faces), 3))
-    for i, f in enumerate(faces):      # a warning's few faces, not a hot path
-        s, k = scene.face_starts[f], scene.face_sizes[f]
-        out[i] = scene.vertices[scene.corner_verts[s:s + k]].mean(axis=0)
-    return out
+def _centroids(scene):
+    """(F, 3) corner means of every face (any corner counts), as :func:`find_duplicates` uses."""
+    first = np.cumsum(scene.face_sizes) - scene.face_sizes
+    corners, _ = scene.face_corner_indices()
+    pos = scene.vertices[scene.corner_verts[corners]]
+    return np.add.reduceat(pos, first, axis=0) / scene.face_sizes[:, None]
 
 
 def near_duplicate_warning(scene, *, rtol=NEAR_DUPLICATE_RTOL):
@@ -225,9 +221,9 @@ def near_duplicate_warning(scene, *, rtol=NEAR_DUPLICATE_RTOL):
         return None
     # Kept: copies facing the same way, or facing each other (a flipped copy over the floor);
     # not faces back to back (a pane's two sides, each facing away from the other).
+    centroid = _centroids(scene)
     n_f, n_g = scene.face_normals[faces], scene.face_normals[near[faces]]
-    c_f = _face_corners_any(scene, faces)
-    c_g = _face_corners_any(scene, near[faces])
+    c_f, c_g = centroid[faces], centroid[near[faces]]
     same = np.einsum("ij,ij->i", n_f, n_g) > 0
     facing = np.einsum("ij,ij->i", c_g - c_f, n_f) > 0
     faces = faces[same | facing]
@@ -238,8 +234,8 @@ def near_duplicate_warning(scene, *, rtol=NEAR_DUPLICATE_RTOL):
     names = [f'"{scene.object_names[o]}"' for o in objs[:MAX_NAMED]]
     more = f" and {objs.size - MAX_NAMED} more" if objs.size > MAX_NAMED else ""
     f, g = int(faces[0]), int(kept[0])
-    gap = float(np.linalg.norm(_face_corners(scene, np.array([f])).mean(axis=1)
-                               - _face_corners(scene, np.array([g])).mean(axis=1)))
-    return (f"{faces.size} faces lie {gap:.3g} m or so from a copy of themselves (e.g. {scene.face_label(f)} and {scene.face_label(g)}) in objects "
+    gap = float(np.linalg.norm(centroid[f] - centroid[g]))
+    return (f"{faces.size} faces lie {gap:.3g} m or so from a copy of themselves (e.g. "
+            f"{scene.face_label(f)} and {scene.face_label(g)}) in objects "
             f"{', '.join(names)}{more}: solved as the thin gap between two surfaces; if one is "
             f"a leftover copy, delete it")
