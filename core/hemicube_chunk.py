@@ -179,6 +179,7 @@ def _chunk_rows_raw(sc, eyes, frames, timings):
         item_pair.append(pair_g)
     item_pair = np.concatenate(item_pair)
     zb.flush()
+    fill_cracks(zb.keys, s_n, sc)
     t4 = time.process_time()
     # The z-buffer is drawn while spans are made: reported apart.
     t3, t4 = t3 - zb_spans, t4 - zb.seconds
@@ -297,6 +298,34 @@ def _clipped_bbox(verts, near):
         lo.append(np.fmin.reduce(np.fmin(proj, cut)).astype(np.float64))
         hi.append(np.fmax.reduce(np.fmax(proj, cut)).astype(np.float64))
     return lo, hi
+
+
+def fill_cracks(keys, s_n, sc):
+    """Fill the empty pixels of ``s_n`` hemicubes' z-buffer ``keys`` whose four neighbours on
+    their face are all drawn, with the nearest neighbour's fragment (in place).
+
+    Polygons that share an edge leave no gap (the rasteriser's spans; module doc of
+    :mod:`core.hemicube_raster`), but the patches of an adaptive hierarchy meet at T-junctions:
+    a corner of one patch lies on the edge of its coarser neighbour, and the edges of the two
+    sides are different lines that agree only up to rounding. A pixel centre on such a junction
+    can fall between both, and the hemicube sees through a closed room there (measured: one top
+    pixel, 0.22 % of a floor patch's row at R = 16, 4e-6 of the emitted power escaped a closed
+    room). An opening that leaves a single pixel empty with all four neighbours drawn is below
+    the resolution anyway: it is read as its nearest neighbour, like the crack.
+    """
+    cells = keys[:s_n * sc.npix].reshape(s_n, sc.npix)
+    r = sc.r
+    for off, rows in zip(sc.face_offset, sc.face_rows):          # five faces
+        face = cells[:, off:off + rows * r].reshape(s_n, rows, r)
+        inner = face[:, 1:-1, 1:-1]
+        up, down = face[:, :-2, 1:-1], face[:, 2:, 1:-1]
+        left, right = face[:, 1:-1, :-2], face[:, 1:-1, 2:]
+        hole = (inner == 0) & (up != 0) & (down != 0) & (left != 0) & (right != 0)
+        if hole.any():
+            s, i, j = np.nonzero(hole)
+            near = np.maximum.reduce([up[s, i, j], down[s, i, j], left[s, i, j],
+                                      right[s, i, j]])
+            face[s, i + 1, j + 1] = near
 
 
 def rows_in_chunks(sc, eyes, frames, out, timings):

@@ -31,6 +31,7 @@ from .gather import corner_groups, gather_rows, gathered_colours
 from .orient import BACKLIGHT_RATIO, MIN_LIT
 from .progress import SubMonitor
 from .reciprocity import asymmetry, make_reciprocal
+from .covered import covered_fronts
 from .rows import RECIPROCAL_METHODS, Batcher, RowStore, discover, row_function, row_seconds
 from .solvers import (matvec, solve_direct, solve_gauss_seidel, solve_jacobi,
                       solve_progressive)
@@ -155,13 +156,18 @@ def node_arrays(scene, patches, two_sided, direct=None):
     allowed = np.ones(2 * P, dtype=bool)
     if not two_sided:
         allowed[P:] = False
+    # Fronts lying face to face on another face (the floor under a box): black, unlit.
+    covered = np.concatenate([covered_fronts(scene, patches), np.zeros(P, dtype=bool)])
+    allowed[covered] = False
+    rho_n[covered] = 0.0
     direct_n = exact = direct_exact = None
     if direct is not None and len(direct):
-        direct_n = direct.patch_incident(patches, two_sided)
+        direct_n = np.where(covered[:, None], 0.0, direct.patch_incident(patches, two_sided))
         if direct.emitters is not None:
             mine = np.tile(np.isin(patches.face, direct.emitters.faces), 2)
             exact = np.where(mine[:, None], le_n, 0.0)
-            direct_exact = direct.patch_incident(patches, two_sided, emitters_only=True)
+            direct_exact = np.where(covered[:, None], 0.0,
+                                    direct.patch_incident(patches, two_sided, emitters_only=True))
     return Nodes(rho_n, le_n, areas, allowed, direct_n, exact=exact, direct_exact=direct_exact)
 
 
@@ -220,7 +226,7 @@ def form_factors(patches, nodes, settings, monitor, store=None, active=None, *, 
     # patch can slip between the pixels of every hemicube that looks at it, so "hit by an
     # active row" alone would leave it black. What these late rows hit is not added: a node
     # that only unlit nodes see (the inside of a box, seen from the floor under it) stays out.
-    late = np.flatnonzero(~active[:P])
+    late = np.flatnonzero(~active[:P] & nodes.allowed[:P])   # not covered fronts (black)
     if skip_late is not None and len(late):
         late = late[~skip_late(active, late)]
     if all_nodes:
