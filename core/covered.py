@@ -17,6 +17,11 @@ Here such a front is found geometrically (its whole patch lies inside a face of 
 orientation in its plane, within the contact distance) and made a black node: it receives no
 direct light, sends nothing and takes no hemicube row; what other rows credit to it is absorbed.
 
+A covered front is still drawn in the hemicubes: seen from inside a box, the floor under it and
+the box's bottom lie at one depth and rounding picks which one a pixel sees. The light that
+reaches the floor there is absorbed, so the energy balance holds either way; the box's inside
+reads a little darker (no one sees it).
+
 Faces that are near-duplicates of each other (a flipped copy of a floor over it,
 :func:`core.duplicates.near_duplicate_warning`) are not covers: which of the two shows the light
 is the user's model, and both keep it. Emitting fronts are never covered (a lamp face down on a
