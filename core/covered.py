@@ -33,6 +33,7 @@ import numpy as np
 from . import constants
 from .contacts import GRID_CELLS, _box_pairs
 from .duplicates import NEAR_DUPLICATE_RTOL, find_duplicates
+from .geometry import unit_frames
 from .transfer import padded_polygons
 
 #: A patch's corners are tested this fraction of the way in towards its centre: the pieces cut
@@ -100,10 +101,7 @@ def _inside(points, polys, normals):
     """(K,) bool: ``points`` (K, 3) inside the planar polygons ``polys`` (K, n, 3) of unit
     ``normals``, projected on the polygon's plane (crossing number; a padded polygon's
     repeated corners add zero-length edges, which cross nothing)."""
-    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    u = np.cross(normals, helper)
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    v = np.cross(normals, u)
+    u, v = unit_frames(normals)
     rel = polys - points[:, None, :]
     x, y = np.einsum("knj,kj->kn", rel, u), np.einsum("knj,kj->kn", rel, v)
     x1, y1 = np.roll(x, -1, axis=1), np.roll(y, -1, axis=1)

@@ -208,6 +208,15 @@ def plane_basis(normal):
     return u, v
 
 
+def unit_frames(d):
+    """Two unit vectors (n, 3) each perpendicular to the unit rows of ``d`` (n, 3) and to each
+    other (``d``, e1, e2 right-handed)."""
+    helper = np.where(np.abs(d[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    e1 = np.cross(d, helper)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    return e1, np.cross(d, e1)
+
+
 def triangulate_polygon(points, normal):
     """Ear-clipping triangulation of one simple polygon in its plane.
 

@@ -43,6 +43,7 @@ fixed spiral, turned per point by a hash of the point's position.
 import numpy as np
 
 from .exact import bilinear, gauss_square, ray_triangles
+from .geometry import unit_frames
 from .light_list import make_lights
 from .raycast import any_hit, build_bvh
 
@@ -99,14 +100,6 @@ def _spiral(k):
     r = np.sqrt(i / k)
     a = i * np.pi * (3.0 - np.sqrt(5.0))
     return np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
-
-
-def _frame(d):
-    """Two unit vectors (n, 3) each perpendicular to the unit rows of ``d`` and to each other."""
-    helper = np.where(np.abs(d[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    e1 = np.cross(d, helper)
-    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    return e1, np.cross(d, e1)
 
 
 def _turn(points):
@@ -281,7 +274,7 @@ class DirectLight:
             clear = ~self._shadowed(origin, ldir, dist, np.zeros((n, 3)))
             self.rays += n
             return clear.astype(np.float64), clear
-        e1, e2 = _frame(ldir)
+        e1, e2 = unit_frames(ldir)
         c, s = np.cos(turn)[:, None], np.sin(turn)[:, None]
 
         def visible(rows, disk):

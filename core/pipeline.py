@@ -28,10 +28,10 @@ import numpy as np
 from .colours import corner_colours
 from .elements import bake_elements
 from .gather import corner_groups, gather_rows, gathered_colours
+from .covered import covered_fronts
 from .orient import BACKLIGHT_RATIO, MIN_LIT
 from .progress import SubMonitor
 from .reciprocity import asymmetry, make_reciprocal
-from .covered import covered_fronts
 from .rows import RECIPROCAL_METHODS, Batcher, RowStore, discover, row_function, row_seconds
 from .solvers import (matvec, solve_direct, solve_gauss_seidel, solve_jacobi,
                       solve_progressive)
