@@ -26,9 +26,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .colours import corner_colours
+from .covered import covered_fronts
 from .elements import bake_elements
 from .gather import corner_groups, gather_rows, gathered_colours
-from .covered import covered_fronts
 from .orient import BACKLIGHT_RATIO, MIN_LIT
 from .progress import SubMonitor
 from .reciprocity import asymmetry, make_reciprocal
