@@ -214,12 +214,13 @@ class AdaptiveState:
         self.__dict__.update(kw)
 
     def colours(self, scene, node_radiance):
-        """(C_out, 3) output corner colours for the solved ``node_radiance`` (2P, 3)."""
+        """(C_out, 3) output corner colours and (C_out, 3) incident light (irradiance / pi)
+        for the solved ``node_radiance`` (2P, 3)."""
         L = node_radiance
         if self.elements is not None:
             L = self.elements.node_radiance(scene, node_radiance)
         inc = self.rows.incident(self.seen.radiance(L)) + self.direct
-        return shade(scene, self.material, inc)[self.entry]
+        return shade(scene, self.material, inc)[self.entry], inc[self.entry]
 
 
 def _leaf_scene(scene, tree, conf, flipped=None):
@@ -441,6 +442,9 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         corner_value = np.zeros((C, 3))
         corner_value[ok] = group_value[groups.group[ok]]
         corner_value = borrow_at_vertex(leaf_scene.corner_verts, groups.group >= 0, corner_value)
+        corner_inc = np.zeros((C, 3))
+        corner_inc[ok] = cache.incident[ids][groups.group[ok]]
+        corner_inc = borrow_at_vertex(leaf_scene.corner_verts, groups.group >= 0, corner_inc)
         step = dict(level=level, leaves=int(tree.leaves.shape[0]),
                     points=int(tree.points.shape[0]), gathered=int(go.size),
                     unlit=int(new.size - go.size))
@@ -472,6 +476,7 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
     corner_entry[ok] = entry[groups.group[ok]]
     mesh, copied = copy_duplicate_faces(scene, mesh)   # stability (issue 11): duplicates' faces
     corner_entry = corner_entry[copied]
+    mesh = dataclasses.replace(mesh, corner_incident=corner_inc[copied])
     state = AdaptiveState(mesh=mesh, entry=corner_entry,
                           material=cache.keys[u_ids, 1].astype(np.int64),
                           rows=cache.rows_for(u_ids), lit=lit, elements=elements, seen=seen,
@@ -560,8 +565,8 @@ def mesh_colours(scene, settings, patches, node_radiance, incident, state, conta
     lit = _lit(scene, patches, incident, flipped)
     t0 = time.perf_counter()
     if isinstance(state, AdaptiveState) and not np.any(lit & ~state.lit):
-        mesh = dataclasses.replace(state.mesh,
-                                   corner_colours=state.colours(scene, node_radiance))
+        value, inc = state.colours(scene, node_radiance)
+        mesh = dataclasses.replace(state.mesh, corner_colours=value, corner_incident=inc)
         state = AdaptiveState(**{**state.__dict__, "mesh": mesh})
         report = dict(rebuilt=False, per_object=per_object_report(scene, mesh))
         if state.elements is not None:

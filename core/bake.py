@@ -30,8 +30,8 @@ from .duplicates import (duplicate_warning, fill_duplicate_colours, merge_duplic
                          near_duplicate_warning)
 from .orient import orient
 from .patches import make_patches, subdivide_patches
-from .pipeline import (check_result, colours, form_factors, make_gather, node_arrays, solve,
-                       with_world)
+from .pipeline import (check_result, colours, form_factors, gathered_incident, make_gather,
+                       node_arrays, solve, with_world)
 from .progress import Monitor
 from .reciprocity import make_reciprocal
 from .refine import refine_mask
@@ -69,6 +69,9 @@ class BakeResult:
         ``output_mode='vertices'``: see :func:`core.criteria.face_variation`).
     output : core.outmesh.OutputMesh or None
         The radiosity mesh (``output_mode='mesh'``); None with ``output_mode='vertices'``.
+    corner_incident : (C, 3) float64 or None
+        Light arriving at every scene corner (irradiance / pi, before the reflectance;
+        :func:`core.lux.lux` makes it lux); None with ``corners='average'``.
     """
 
     corner_colours: np.ndarray
@@ -78,6 +81,7 @@ class BakeResult:
     report: dict
     _state: object = field(default=None, repr=False)
     output: object = None
+    corner_incident: np.ndarray = None
 
 
 @dataclass(frozen=True)
@@ -94,6 +98,7 @@ class _State:
     contact_lines: object = None  # core.contacts.Contacts ('mesh' output), or None
     flipped: np.ndarray = None    # (F,) bool: faces baked on their back side (core.orient)
     direct: object = None         # core.lights.DirectLight of the scene's lights, or None
+    solved: np.ndarray = None     # (2P, 3) solved node radiance (exact emitters' light apart)
 
 
 def bake(scene, settings=None, *, progress=None, cancel=None):
@@ -399,6 +404,15 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
                                          np.concatenate([room_side, shown[P:]]),
                                          settings, gather)
     corner = fill_duplicate_colours(scene, corner)       # stability (issue 11)
+    incident = None
+    if mesh is not None:
+        incident = np.zeros((scene.n_corners, 3))
+        has = gather.user >= 0
+        incident[has] = mesh.corner_incident[gather.user[has]]
+        incident = fill_duplicate_colours(scene, incident)
+    elif settings.corners == "gather":
+        incident = fill_duplicate_colours(scene, gathered_incident(side.scene, sol.node_radiance,
+                                                                   gather))
     timings["colours"] = time.perf_counter() - t0
     monitor.update(1.0, "done")
     timings["total"] = time.perf_counter() - t_start
@@ -439,5 +453,6 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
         if direct.emitters is not None:
             report["lights"]["exact_emitter_faces"] = int(direct.emitters.faces.size)
     state = _State(scene, settings, patches, sol.store, ff.active, gather, on_contact,
-                   contact_lines, side.flipped, direct)
-    return BakeResult(corner, patch_radiance, shown, patches, report, state, output=mesh)
+                   contact_lines, side.flipped, direct, sol.node_radiance)
+    return BakeResult(corner, patch_radiance, shown, patches, report, state, output=mesh,
+                      corner_incident=incident)

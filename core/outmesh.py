@@ -41,6 +41,9 @@ class OutputMesh:
         ``sum_k corner_weights[c, k] * value[corner_sources[c, k]]``.
     corner_weights : (C, 3) float64
         Barycentric weights over ``corner_sources``, each >= 0, summing to 1.
+    corner_incident : (C, 3) float64 or None
+        Light arriving at every output corner (irradiance / pi, RGB; before the surface's
+        reflectance): ``core.lux.lux`` makes it lux.
     """
 
     vertices: np.ndarray
@@ -51,6 +54,7 @@ class OutputMesh:
     corner_colours: np.ndarray
     corner_sources: np.ndarray
     corner_weights: np.ndarray
+    corner_incident: np.ndarray = None
 
     def __post_init__(self):
         V = _shape("vertices", self.vertices, 2, 3)[0]
@@ -61,6 +65,8 @@ class OutputMesh:
         _shape("corner_colours", self.corner_colours, 2, 3, n=C)
         _shape("corner_sources", self.corner_sources, 2, 3, n=C)
         _shape("corner_weights", self.corner_weights, 2, 3, n=C)
+        if self.corner_incident is not None:
+            _shape("corner_incident", self.corner_incident, 2, 3, n=C)
         if C and (self.corner_verts.min() < 0 or self.corner_verts.max() >= V):
             raise RadiosityError(f"OutputMesh.corner_verts must index {V} vertices")
         if F and (np.any((self.face_sizes < 3) | (self.face_sizes > 4))

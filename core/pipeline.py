@@ -468,6 +468,21 @@ def colours(scene, patches, node_radiance, settings, gather):
                             gather.direct), element_report
 
 
+def gathered_incident(scene, node_radiance, gather):
+    """(C, 3) light arriving at every scene corner (irradiance / pi) from the kept gather rows
+    (``corners='gather'``); zero at the corners of dropped faces."""
+    seen_radiance = node_radiance
+    if gather.elements is not None:
+        seen_radiance = gather.elements.node_radiance(scene, node_radiance)
+    inc = gather.rows.incident(seen_radiance)
+    if gather.direct is not None:
+        inc = inc + gather.direct
+    out = np.zeros((scene.n_corners, 3))
+    ok = gather.groups.group >= 0
+    out[ok] = inc[gather.groups.group[ok]]
+    return out
+
+
 def check_result(scene, patches, sol, open_back=None):
     """Warnings about the scene and the energy balance, and the balance in watts (dict)."""
     warnings = []

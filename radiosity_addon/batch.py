@@ -18,6 +18,7 @@ options given without ``--``), where Blender alone would print a traceback and e
 
 import argparse
 import contextlib
+import csv
 import errno
 import importlib
 import importlib.util
@@ -96,6 +97,12 @@ def build_parser(need_input):
     p.add_argument("--in-place", action="store_true", help="overwrite the input .blend")
     p.add_argument("--report", help="write the bake report (JSON) here")
     p.add_argument("--render", help="render the baked colours (Workbench) to this PNG")
+    p.add_argument("--calc-surface", action="append", default=[], metavar="OBJECT",
+                   help="measure illuminance on this mesh object (repeatable): it becomes a "
+                        "calculation surface, which neither blocks nor reflects light")
+    p.add_argument("--lux", help="write the calculation surfaces' grid illuminance here: "
+                                 ".csv (object, x, y, z, lux per point) or .json (per surface: "
+                                 "Emin, Eavg, Emax, U0, grid points and their lux)")
     for row in OPTIONS:
         add_option(p, row)
     return p
@@ -269,19 +276,32 @@ def run(argv):
     report_path = args.report and _output_path("--report", args.report, taken)
     if args.render and bpy.context.scene.camera is None:
         raise BatchError("--render needs a scene camera; the scene has none")
+    lux_path = args.lux and _output_path("--lux", args.lux, taken)
+    if args.lux and os.path.splitext(args.lux)[1].lower() not in (".csv", ".json"):
+        raise BatchError(f"--lux {args.lux}: give a .csv or .json file name")
 
     from . import register
-    from .job import CORE_OPTIONS, BakeError, bake_now, options_from_props
+    from .job import CORE_OPTIONS, BakeError, apply, compute, options_from_props, prepare
 
     if not hasattr(bpy.types.Scene, "radiosity"):
         register()
+    objects = bpy.context.scene.objects
+    for name in args.calc_surface:
+        obj = objects.get(name)
+        if obj is None or obj.type != "MESH":
+            raise BatchError(f"--calc-surface {name}: the scene has no mesh object of that name")
+        obj.radiosity_calc_surface = True
+    if args.lux and not any(o.type == "MESH" and o.radiosity_calc_surface for o in objects):
+        raise BatchError("--lux: no calculation surface; mark one (Object > Calculation "
+                         "Surface) or give --calc-surface OBJECT")
     options = options_from_props(bpy.context.scene.radiosity)
     for key in CORE_OPTIONS + ("selected_only", "make_single_user"):
         value = getattr(args, key)
         if value is not None:
             options[key] = None if value is AUTO else value
     try:
-        report = bake_now(bpy.context, options)
+        bake_input = prepare(bpy.context, options)
+        report = apply(bpy.context, bake_input, compute(bake_input))
     except BakeError as exc:
         raise BatchError(str(exc))
     report["input"] = src
@@ -298,6 +318,13 @@ def run(argv):
                       lambda tmp: render_baked(bpy.context.scene, tmp))
         report["render"] = render
         _say(f"rendered the baked colours -> {args.render}")
+    if lux_path:
+        _atomic_write("--lux", args.lux, lux_path,
+                      lambda tmp: write_lux_file(tmp, bake_input.extraction.surfaces,
+                                                 args.lux.lower().endswith(".csv")))
+        report["lux"] = lux_path
+        _say(f"illuminance of {len(bake_input.extraction.surfaces)} calculation surface(s) "
+             f"-> {args.lux}")
     if report_path:
         def dump(tmp):
             with open(tmp, "w", encoding="utf-8") as fh:
@@ -305,6 +332,19 @@ def run(argv):
         _atomic_write("--report", args.report, report_path, dump)
         _say(f"report -> {args.report}")
     return report
+
+
+def write_lux_file(path, surfaces, as_csv):
+    """The calculation surfaces' grid illuminance: CSV rows (object, x, y, z, lux) or JSON (per
+    surface its summary and points)."""
+    from .surfaces import rows
+
+    with open(path, "w", encoding="utf-8", newline="") as fh:
+        if as_csv:
+            csv.writer(fh).writerows(rows(surfaces))
+        else:
+            json.dump([dict(s.summary, grid=s.grid.tolist(), lux=s.grid_lux.tolist())
+                       for s in surfaces], fh, indent=1)
 
 
 def _say(text):

@@ -17,6 +17,7 @@ from ..core.errors import SceneError
 from ..core.light_list import make_lights
 from ..core.photometry import read_photometry
 from .materials import MaterialReader, area_light_polygon, area_light_radiance
+from .surfaces import is_calc_surface, read_surface
 
 #: An area light is modelled as a one-sided emitting polygon: its front emits the converted
 #: radiance, it reflects nothing, and its back side is black (the core's back_reflectance /
@@ -85,7 +86,7 @@ class Extraction:
     """What :func:`extract` read: the make_scene arguments, the parts to write, the notes.
 
     ``lights`` counts every light read (area, point, spot and sun), ``area_lights`` the area
-    lights among them.
+    lights among them; ``surfaces`` are the calculation surfaces (left out of the arrays).
     """
 
     arrays: dict
@@ -95,6 +96,7 @@ class Extraction:
     instances: int = 0
     lights: int = 0
     area_lights: int = 0
+    surfaces: list = field(default_factory=list)    # surfaces.CalcSurface
 
 
 def read_mesh_layout(mesh):
@@ -149,11 +151,15 @@ ATTRIBUTE_TYPES = {"FLOAT": ("value", 1, np.float32), "FLOAT2": ("vector", 2, np
                    "INT": ("value", 1, np.int32), "INT8": ("value", 1, np.int32),
                    "BOOLEAN": ("value", 1, bool)}
 
-#: Name of the colour attribute the bake writes (and the only one it touches or clears).
+#: Name of the colour attribute the bake writes.
 ATTRIBUTE = "Radiosity"
 
+#: Name of the FLOAT attribute of illuminance (lx) the bake writes: per corner on baked meshes,
+#: per point on calculation surfaces. With ATTRIBUTE, the only ones it touches or clears.
+LUX_ATTRIBUTE = "Radiosity Lux"
+
 #: Attributes a baked mesh gets otherwise (geometry, UV maps, material, shading) or never keeps.
-OWN_ATTRIBUTES = {"position", "material_index", "sharp_face", ATTRIBUTE}
+OWN_ATTRIBUTES = {"position", "material_index", "sharp_face", ATTRIBUTE, LUX_ATTRIBUTE}
 
 
 def read_attributes(mesh):
@@ -295,6 +301,15 @@ def _extract(depsgraph, selected_only):
                 _add_light(inst, unit, out, add_faces, object_names, rho, le, mat_keys, one_sided)
             else:
                 unsupported.setdefault(obj.data.type.capitalize(), []).append(obj.name)
+            continue
+        if is_calc_surface(obj):          # measures the light, takes no part in it
+            if not inst.is_instance and obj.original.visible_get(view_layer=view_layer):
+                mesh = obj.to_mesh()
+                layout = read_mesh_layout(mesh)
+                obj.to_mesh_clear()
+                if layout[2].size:
+                    out.surfaces.append(read_surface(
+                        obj, unit @ np.array(inst.matrix_world, dtype=np.float64), layout))
             continue
         if not _is_visible(inst, view_layer, selected_only):
             continue

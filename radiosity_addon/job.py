@@ -16,10 +16,13 @@ from dataclasses import dataclass
 
 from .. import core
 from ..core.errors import BakeCancelled, RadiosityError
+from ..core.lux import lux
 from ..core.settings import EXPOSED, as_dict
+from . import surfaces
 from .extract import extract
 from .props import OPTIONS, from_blender
-from .write import WriteError, check_writable, show_in_viewports, write_colours, write_mesh
+from .write import (WriteError, check_writable, is_baked, show_in_viewports, write_colours,
+                    write_mesh)
 
 #: Bake options that come from the panel / the batch command line and go to core.BakeSettings:
 #: the exposed rows of the core's settings table.
@@ -98,6 +101,12 @@ def prepare(context, options):
                        options["make_single_user"], mesh_output=settings.output_mode == "mesh")
     except WriteError as exc:
         raise BakeError(str(exc)) from exc
+    for surf in ext.surfaces:
+        obj = objects[surf.object_name]
+        if obj.data.library is not None or is_baked(obj):
+            why = "is linked from a library" if obj.data.library is not None else \
+                "shows a baked mesh (Clear Bake on it first)"
+            raise BakeError(f"Calculation surface '{obj.name}': its mesh '{obj.data.name}' {why}")
     return BakeInput(scene, settings, ext, context.scene.name, options["make_single_user"],
                      time.perf_counter() - t0)
 
@@ -112,9 +121,13 @@ def _has_light(arrays):
 
 
 def compute(bake_input, progress=None, cancel=None):
-    """Run the core bake (any thread). Raises core.BakeCancelled when cancelled."""
+    """Run the core bake and measure the calculation surfaces (any thread; they are filled in
+    place). Raises core.BakeCancelled when cancelled."""
     try:
-        return core.bake(bake_input.scene, bake_input.settings, progress=progress, cancel=cancel)
+        result = core.bake(bake_input.scene, bake_input.settings, progress=progress,
+                           cancel=cancel)
+        surfaces.measure(result, bake_input.extraction.surfaces, cancel)
+        return result
     except BakeCancelled:
         raise
     except RadiosityError as exc:
@@ -134,6 +147,8 @@ def make_report(bake_input, result, write_seconds):
     report["timings"]["write"] = write_seconds
     report["warnings"] = list(ext.warnings) + list(report.get("warnings", []))
     report["notes"] = list(ext.notes)
+    if ext.surfaces:
+        report["calculation_surfaces"] = [s.summary for s in ext.surfaces]
     return report
 
 
@@ -158,9 +173,12 @@ def apply(context, bake_input, result):
         if output is not None:
             written = write_mesh(objects, bake_input.extraction.parts, output)
         else:
+            incident = getattr(result, "corner_incident", None)
             write_colours(objects, bake_input.extraction.parts, result.corner_colours,
-                          make_single_user=bake_input.make_single_user)
+                          make_single_user=bake_input.make_single_user,
+                          corner_lux=None if incident is None else lux(incident))
             written = None
+        surfaces.write(objects, bake_input.extraction.surfaces)
     except (WriteError, KeyError) as exc:
         raise BakeError(f"Could not write the result: {exc}") from exc
     report = make_report(bake_input, result, time.perf_counter() - t0)

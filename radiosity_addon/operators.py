@@ -166,7 +166,7 @@ def _end_display(context):
 
 
 class RADIOSITY_OT_clear(bpy.types.Operator):
-    """Remove the 'Radiosity' colour attribute (and nothing else) from the scene's meshes"""
+    """Restore the baked meshes and remove the bake's colour and lux attributes (nothing else)"""
 
     bl_idname = "radiosity.clear"
     bl_label = "Clear Bake"

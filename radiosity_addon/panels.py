@@ -10,7 +10,7 @@ import json
 
 import bpy
 
-from .extract import ATTRIBUTE
+from .extract import ATTRIBUTE, LUX_ATTRIBUTE
 
 #: Stage timings of the report, in the order a user reads them, with their labels (total first).
 STAGE_LABELS = (
@@ -34,8 +34,9 @@ def _split_row(layout, label):
 
 
 def has_bake(scene):
-    """True when a mesh of *scene* carries the baked colour attribute."""
-    return any(o.type == "MESH" and o.data is not None and ATTRIBUTE in o.data.color_attributes
+    """True when a mesh of *scene* carries the baked colour or lux attribute."""
+    return any(o.type == "MESH" and o.data is not None
+               and (ATTRIBUTE in o.data.color_attributes or LUX_ATTRIBUTE in o.data.attributes)
                for o in scene.objects)
 
 
@@ -79,6 +80,10 @@ class VIEW3D_PT_radiosity(bpy.types.Panel):
             layout.label(text="Esc cancels", icon="INFO")
         else:
             layout.operator("radiosity.bake", icon="LIGHT_AREA")
+
+        obj = context.active_object
+        if obj is not None and obj.type == "MESH":
+            layout.prop(obj, "radiosity_calc_surface", text="Calculation Surface (lux)")
 
         box = layout.box()
         if has_bake(context.scene):
@@ -170,6 +175,13 @@ def summary_lines(text):
     for key, seconds in timings.items():
         if key not in known:
             lines.append((f"{key.replace('_', ' ').capitalize()}: {seconds:.2f} s", "NONE"))
+    for surf in report.get("calculation_surfaces", []):
+        try:
+            lines.append((f"{surf['object']}: Eavg {surf['Eavg']:.0f} lx, Emin "
+                          f"{surf['Emin']:.0f}, Emax {surf['Emax']:.0f}, U0 {surf['U0']:.2f}",
+                          "LIGHT"))
+        except (KeyError, TypeError, ValueError):
+            continue
     for warning in report.get("warnings", []):
         lines.append((str(warning), "ERROR"))
     return lines

@@ -125,18 +125,33 @@ LIGHT_PROPERTIES = dict(
 )
 
 
+#: Per object: a calculation surface (radiosity_addon.surfaces) measures illuminance and takes
+#: no part in the light.
+OBJECT_PROPERTIES = dict(
+    radiosity_calc_surface=BoolProperty(
+        name="Calculation Surface", default=False,
+        description="Measure illuminance (lux) on this mesh after the bake: EN 12464-1 grid "
+                    "with Emin, Eavg, Emax and U0, and the 'Radiosity Lux' attribute at its "
+                    "vertices. It neither blocks nor reflects light"),
+)
+
+
 def register():
     for cls in CLASSES:
         bpy.utils.register_class(cls)
     bpy.types.Scene.radiosity = bpy.props.PointerProperty(type=RadiositySettings)
     for name, prop in LIGHT_PROPERTIES.items():
         setattr(bpy.types.Light, name, prop)
+    for name, prop in OBJECT_PROPERTIES.items():
+        setattr(bpy.types.Object, name, prop)
     bpy.types.WindowManager.radiosity_progress = FloatProperty(
         name="Progress", subtype="PERCENTAGE", min=0.0, max=100.0, options={"SKIP_SAVE"})
     bpy.types.WindowManager.radiosity_status = StringProperty(options={"SKIP_SAVE"})
 
 
 def unregister():
+    for name in OBJECT_PROPERTIES:
+        delattr(bpy.types.Object, name)
     for name in LIGHT_PROPERTIES:
         delattr(bpy.types.Light, name)
     del bpy.types.WindowManager.radiosity_status

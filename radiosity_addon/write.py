@@ -27,7 +27,8 @@ import numpy as np
 from ..core import transfer
 from ..core.geometry import ragged
 from ..core.transfer import CORNER_INSET  # noqa: F401  (the tolerance of the corner mapping)
-from .extract import ATTRIBUTE, ATTRIBUTE_TYPES, read_mesh_layout, transform
+from ..core.lux import lux
+from .extract import ATTRIBUTE, ATTRIBUTE_TYPES, LUX_ATTRIBUTE, read_mesh_layout, transform
 
 #: Object custom property: the original mesh (an ID pointer) while the object shows a baked mesh.
 PROP_ORIGINAL = "radiosity_original"
@@ -278,17 +279,38 @@ def write_attribute(mesh, colours):
     mesh.update()
 
 
+def write_lux(mesh, values, domain):
+    """Write illuminance (lx) as the FLOAT attribute :data:`LUX_ATTRIBUTE` of *mesh* on
+    ``domain`` ('CORNER' or 'POINT'), replacing ours if it is there."""
+    n = len(mesh.loops) if domain == "CORNER" else len(mesh.vertices)
+    values = np.asarray(values, dtype=np.float64).reshape(-1)
+    if values.shape != (n,):
+        raise WriteError(f"illuminance for mesh '{mesh.name}' must have {n} values "
+                         f"({domain.lower()}s); got {values.size}")
+    attr = mesh.attributes.get(LUX_ATTRIBUTE)
+    if attr is not None:
+        mesh.attributes.remove(attr)
+    mesh.attributes.new(LUX_ATTRIBUTE, "FLOAT", domain).data.foreach_set(
+        "value", values.astype(np.float32))
+
+
 def clear_attribute(mesh):
-    """Remove our attribute from *mesh*; True if there was one."""
+    """Remove our attributes (colours, lux) from *mesh*; True if there was one."""
+    found = False
     attr = mesh.color_attributes.get(ATTRIBUTE)
-    if attr is None:
-        return False
-    mesh.color_attributes.remove(attr)
-    mesh.update()
-    return True
+    if attr is not None:
+        mesh.color_attributes.remove(attr)
+        found = True
+    attr = mesh.attributes.get(LUX_ATTRIBUTE)
+    if attr is not None:
+        mesh.attributes.remove(attr)
+        found = True
+    if found:
+        mesh.update()
+    return found
 
 
-def write_colours(objects, parts, corner_colours, *, make_single_user):
+def write_colours(objects, parts, corner_colours, *, make_single_user, corner_lux=None):
     """Write the bake's colours to the original meshes.
 
     Parameters
@@ -299,6 +321,8 @@ def write_colours(objects, parts, corner_colours, *, make_single_user):
     corner_colours : (C, 3) float64
         The core's corner colours in scene corner order.
     make_single_user : bool
+    corner_lux : (C,) float64, optional
+        Illuminance (lx) at the scene corners, written as :data:`LUX_ATTRIBUTE`.
 
     Returns
     -------
@@ -316,7 +340,13 @@ def write_colours(objects, parts, corner_colours, *, make_single_user):
             mesh = obj.data
         eval_colours = np.empty((part.corner_stop - part.corner_start, 3))
         eval_colours[part.eval_corner_of_scene] = corner_colours[part.corner_start:part.corner_stop]
-        write_attribute(mesh, map_to_original(part, eval_colours, read_mesh_layout(mesh)))
+        layout = read_mesh_layout(mesh)
+        write_attribute(mesh, map_to_original(part, eval_colours, layout))
+        if corner_lux is not None:
+            eval_lux = np.empty((eval_colours.shape[0], 3))
+            eval_lux[part.eval_corner_of_scene] = corner_lux[part.corner_start:
+                                                             part.corner_stop, None]
+            write_lux(mesh, map_to_original(part, eval_lux, layout)[:, 0], "CORNER")
     return len(parts)
 
 
@@ -379,6 +409,9 @@ def part_mesh(part, output, faces):
                     np.arange(corners.size))
     eval_src, weights, pos, cv_out = eval_src[perm], weights[perm], pos[perm], cv_out[perm]
     colours = output.corner_colours[corners][perm]
+    corner_lux = None
+    if output.corner_incident is not None:
+        corner_lux = lux(output.corner_incident[corners][perm])
     verts, inverse = np.unique(cv_out, return_inverse=True)
     inverse = inverse.ravel()
     vpos = np.zeros((verts.size, 3))
@@ -390,7 +423,7 @@ def part_mesh(part, output, faces):
     return dict(vertices=vpos, corner_verts=inverse.astype(np.int64), face_starts=starts,
                 attributes=attributes,
                 face_sizes=sizes.astype(np.int64), face_materials=part.face_materials[parent],
-                face_smooth=part.face_smooth[parent], colours=colours,
+                face_smooth=part.face_smooth[parent], colours=colours, lux=corner_lux,
                 uv_maps=[(name, transfer.interpolate(uv, eval_src, weights))
                          for name, uv in part.uv_maps])
 
@@ -446,6 +479,8 @@ def new_mesh(name, arrays, part, materials):
         mesh.materials.append(mat)
     mesh[PROP_BAKED] = 1
     write_attribute(mesh, arrays["colours"])
+    if arrays.get("lux") is not None:
+        write_lux(mesh, arrays["lux"], "CORNER")
     return mesh
 
 

@@ -72,7 +72,10 @@ def test_attribute_name_type_domain_size_and_nothing_else(package):
     assert len(attr.data) == len(mesh.loops)
     assert mesh.color_attributes.active_color_name == "Radiosity"
     assert mesh.color_attributes.render_color_index == mesh.color_attributes.find("Radiosity")
-    after = {a.name: (a.data_type, a.domain) for a in mesh.attributes if a.name != "Radiosity"}
+    lux = mesh.attributes["Radiosity Lux"]
+    assert (lux.data_type, lux.domain, len(lux.data)) == ("FLOAT", "CORNER", len(mesh.loops))
+    ours = ("Radiosity", "Radiosity Lux")
+    after = {a.name: (a.data_type, a.domain) for a in mesh.attributes if a.name not in ours}
     assert after == before
     col_after = np.empty(16, np.float32)
     mesh.color_attributes["Col"].data.foreach_get("color", col_after)
