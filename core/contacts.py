@@ -134,8 +134,9 @@ def _lines_of(a, b, plane_n):
     return u, w, length
 
 
-def _crossed(corners, k, size, a, u, w, length, tol):
-    """(n,) bool: the segment (a, u, length) crosses the patch (corners, k corners) strictly."""
+def _crossed(corners, k, size, a, u, w, length, tol, along=False):
+    """(n,) bool: the segment (a, u, length) crosses the patch (corners, k corners) strictly;
+    ``along``: it touches the patch instead (runs inside it or along its edge, within tol)."""
     rel = corners - a[:, None, :]
     h = np.einsum("ikj,ij->ik", rel, w)
     t = np.einsum("ikj,ij->ik", rel, u)
@@ -145,6 +146,8 @@ def _crossed(corners, k, size, a, u, w, length, tol):
     h_min = np.where(slot_ok, h, np.inf).min(axis=1)
     t_max = np.where(slot_ok, t, -np.inf).max(axis=1)
     t_min = np.where(slot_ok, t, np.inf).min(axis=1)
+    if along:
+        return (h_max >= -tol) & (h_min <= tol) & (t_max > tol) & (t_min < length - tol)
     return (h_max > margin) & (h_min < -margin) & (t_max > tol) & (t_min < length - tol)
 
 
@@ -207,11 +210,17 @@ class Contacts:
         final gather treats each corner on its own (:mod:`core.gather`).
     tol : float
         The contact distance (m) they were found with.
+    cuts : (K,) bool
+        The segment crosses its patch, which :func:`split_at_contacts` cuts along it; the others
+        run along the patch's edge (a box whose outline follows patch edges: the office's
+        shelving panel standing on a cavity split's edge). Both kinds are contact lines for the
+        final gather and the refinement.
     """
 
-    def __init__(self, patch, a, u, w, length, vertices, tol):
+    def __init__(self, patch, a, u, w, length, vertices, tol, cuts=None):
         self.patch, self.a, self.u, self.w, self.length = patch, a, u, w, length
         self.vertices, self.tol = vertices, tol
+        self.cuts = np.ones(patch.size, dtype=bool) if cuts is None else cuts
 
 
 #: The grid of the spatial join has at most this many cells along the scene's diagonal.
@@ -266,11 +275,33 @@ def find_contacts(scene, patches, *, tol=None):
     pi, gi, a, b = pi[ok], gi[ok], a[ok], b[ok]
     u, w, length = _lines_of(a, b, n_f[pi])
     on_line = _vertices_on_lines(scene, face[pi], gi, a, u, w, length, tol)
-    hit = _crossed(patches.corners[pi], np.where(patches.is_triangle, 3, 4)[pi], size[pi],
-                   a, u, w, length, tol)
-    pi, a, u, w, length = pi[hit], a[hit], u[hit], w[hit], length[hit]
-    o = np.lexsort((gi[hit], pi))
-    return Contacts(pi[o], a[o], u[o], w[o], length[o], on_line, tol)
+    k = np.where(patches.is_triangle, 3, 4)[pi]
+    hit = _crossed(patches.corners[pi], k, size[pi], a, u, w, length, tol)
+    along = ~hit & _crossed(patches.corners[pi], k, size[pi], a, u, w, length, tol, along=True)
+    along[along] = ~_on_outline(scene, face[pi[along]], a[along] + 0.5 * length[along, None]
+                                * u[along], tol)
+    keep = hit | along
+    pi, a, u, w, length, hit = pi[keep], a[keep], u[keep], w[keep], length[keep], hit[keep]
+    o = np.lexsort((gi[keep], pi))
+    return Contacts(pi[o], a[o], u[o], w[o], length[o], on_line, tol, cuts=hit[o])
+
+
+def _on_outline(scene, f, m, tol):
+    """(n,) bool: point m[i] lies within tol of an edge of face f[i] (where another face meets
+    it: a crease, not something standing on it)."""
+    out = np.zeros(f.size, dtype=bool)
+    if f.size == 0:
+        return out
+    owner, local, _ = ragged(scene.face_sizes[f])
+    start = scene.face_starts[f][owner]
+    p = scene.vertices[scene.corner_verts[start + local]]
+    q = scene.vertices[scene.corner_verts[start + (local + 1) % scene.face_sizes[f][owner]]]
+    d = q - p
+    t = np.clip(np.einsum("ij,ij->i", m[owner] - p, d)
+                / np.maximum(np.einsum("ij,ij->i", d, d), 1e-300), 0.0, 1.0)
+    dist = np.linalg.norm(m[owner] - (p + t[:, None] * d), axis=1)
+    np.logical_or.at(out, owner, dist <= tol)
+    return out
 
 
 def _vertices_on_lines(scene, f, g, a, u, w, length, tol):
@@ -404,8 +435,9 @@ def split_at_contacts(scene, patches, contacts=None, *, tol=None):
     if contacts is None:
         contacts = find_contacts(scene, patches, tol=tol)
     tol = contacts.tol
-    pair_p, a, u, w, length = (contacts.patch, contacts.a, contacts.u, contacts.w,
-                               contacts.length)
+    c = contacts.cuts
+    pair_p, a, u, w, length = (contacts.patch[c], contacts.a[c], contacts.u[c], contacts.w[c],
+                               contacts.length[c])
     P0 = patches.n_patches
     info = dict(lines=int(pair_p.size), cut=int(np.unique(pair_p).size), cuts=0, added=0,
                 vertices=int(np.count_nonzero(contacts.vertices)))

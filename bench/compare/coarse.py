@@ -55,6 +55,15 @@ PLANE_TOL = 1e-3
 #: copy lies up to ~2e-6 (in barycentric units of a 2.5 cm triangle) off the edge of another's.
 BARY_TOL = 1e-4
 
+#: Each reference corner is looked up this fraction of the way from its vertex to its face's
+#: centroid: where Cycles bakes a corner (inside its face). It matters only on discontinuities:
+#: the office's floor corners at the foot of the shelving's end panels (x = 1.2 and 3.0) read
+#: exactly 0 in all three 1024-spp references, in every channel -- Cycles sampled them under the
+#: panel, not on the room side of it; sampled at the vertex itself, our field read the lit floor
+#: there (those floor faces +104 % and +158 %), and a panel's inner face at the foot of a
+#: shelf board took the covered side (-38 % and -41 %).
+CORNER_INSET = 1e-3
+
 #: Points x triangles per block of the vectorised search (memory ~ 8 arrays of this many floats).
 BLOCK = 2_000_000
 
@@ -205,11 +214,15 @@ def sample_field(corner_colours, corners, weights):
 
 
 def ref_queries(arrays, scene, names):
-    """Query points of the reference's corners: positions (C, 3), normals (C, 3), groups (C,)
-    (index into ``names`` of the corner's object)."""
+    """Query points of the reference's corners: positions (C, 3) (:data:`CORNER_INSET` inside
+    their faces), normals (C, 3), groups (C,) (index into ``names`` of the corner's object)."""
     face = np.repeat(np.arange(len(arrays["face_starts"])), arrays["face_sizes"])
     obj = groups_of(arrays, names)
-    return (arrays["vertices"][arrays["corner_verts"]], scene.face_normals[face], obj[face])
+    pos = arrays["vertices"][arrays["corner_verts"]]
+    centroid = np.stack([np.bincount(face, weights=pos[:, k]) for k in range(3)], axis=1)
+    centroid /= np.asarray(arrays["face_sizes"])[:, None]
+    pts = pos + CORNER_INSET * (centroid[face] - pos)
+    return pts, scene.face_normals[face], obj[face]
 
 
 def groups_of(arrays, names):

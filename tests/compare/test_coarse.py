@@ -123,3 +123,28 @@ def test_at_error_interpolates_a_power_law_in_log_log():
     assert how == "interpolated" and v == pytest.approx(900.0, rel=1e-12)
     v, how = coarse.at_error(x, e, 2.0 / np.sqrt(6400.0))
     assert how == "extrapolated" and v == pytest.approx(6400.0, rel=1e-12)
+
+
+def test_reference_corners_are_sampled_inside_their_faces():
+    # A field that jumps across x = 1 (0 on the left quad, 1 on the right; separate vertices on
+    # the line, as at the foot of a panel). A reference quad over [0.5, 1] x [0, 1] has two
+    # corners on the line; Cycles bakes a corner inside its face, so those corners must read
+    # the left quad's 0, never the right one's 1 (or a blend).
+    from core.scene import make_scene
+
+    verts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
+                      [1, 0, 0], [2, 0, 0], [2, 1, 0], [1, 1, 0]], dtype=float)
+    ours = (verts, np.arange(8), np.array([0, 4]), np.array([4, 4]), np.zeros(2, int),
+            np.repeat([[0.0] * 3, [1.0] * 3], 4, axis=0))
+    ref = dict(vertices=np.array([[0.5, 0, 0], [1, 0, 0], [1, 1, 0], [0.5, 1, 0]], dtype=float),
+               corner_verts=np.arange(4), face_starts=np.array([0]), face_sizes=np.array([4]),
+               face_materials=np.array([0]), face_objects=np.array([0]), object_names=("A",))
+    scene = make_scene(ref["vertices"], ref["corner_verts"], ref["face_starts"],
+                       ref["face_sizes"], ref["face_materials"], [[0.5] * 3], [[1.0] * 3])
+    pts, nrm, grp = coarse.ref_queries(ref, scene, ["A"])
+    assert np.all(pts[:, 0] < 1.0) and np.all(pts[:, 0] > 0.5)
+    np.testing.assert_allclose(np.linalg.norm(pts - ref["vertices"], axis=1),
+                               coarse.CORNER_INSET
+                               * np.linalg.norm(ref["vertices"] - [0.75, 0.5, 0], axis=1))
+    values, miss = sample(ours, pts, nrm, grp)
+    assert np.all(values == 0.0) and np.all(miss <= coarse.BARY_TOL)

@@ -169,6 +169,33 @@ def test_a_corner_on_the_outline_takes_the_light_of_its_own_side():
     assert off.corner_colours[at][covered].sum() > 0.01
 
 
+def test_an_outline_along_patch_edges_of_a_one_quad_floor_lets_no_light_under():
+    # The office's shelving panel stood on an edge that a split of the floor's one quad had
+    # made (x = 3.0): the line crosses no patch, so it cut nothing and was not a contact line;
+    # the radiosity mesh's vertices on it were gathered once for both sides, from the lit one,
+    # and the strip under the panel read as lit as the floor beside it. Oracle: a closed box
+    # (no bottom) lets no light in, so every output corner of the floor under it reads 0.
+    fp = np.array([[0.97, 0.5], [1.0, 0.5], [1.0, 1.5], [0.97, 1.5]])   # x = 1.0: a patch edge
+    scene = _room(fp, floor_cells=1)
+    res = bake(scene, BakeSettings(patch_size=0.5, resolution=32))
+    found = find_contacts(scene, make_patches(scene, 0.5))
+    along = ~found.cuts & (np.abs(found.a[:, 0] - 1.0) < 1e-9) & (np.abs(found.u[:, 1]) > 0.99)
+    assert along.any() and found.cuts.any()
+    out = res.output
+    floor_faces = np.flatnonzero(scene.face_materials[out.face_parent] == FLOOR)
+    corners = np.concatenate([np.arange(out.face_starts[f], out.face_starts[f] + out.face_sizes[f])
+                              for f in floor_faces])
+    centre = np.array([out.vertices[out.corner_verts[out.face_starts[f]:out.face_starts[f]
+                                                     + out.face_sizes[f]]].mean(axis=0)
+                       for f in floor_faces])
+    under = _inside(centre[:, :2], fp, 0) > 0
+    assert under.sum() >= 2
+    covered = np.isin(out.face_of_corner()[corners], floor_faces[under])
+    lum = out.corner_colours[corners].sum(axis=1)
+    assert lum[covered].max() == 0.0
+    assert np.median(lum[~covered]) > 0.01
+
+
 def test_contact_tolerance_and_parallel_faces():
     # A box floating 1 cm above the floor touches nothing (no cut); one within the contact
     # distance (tol.contact of the bounding diagonal) does.
