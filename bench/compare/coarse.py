@@ -263,8 +263,13 @@ def grid_blend(name, grid, cache):
     path = Path(cache) / ("%s_grid%g.blend" % (name, grid))
     if not path.exists():
         script = ROOT / "scripts" / ("make_%s.py" % name)
-        subprocess.run([str(ROOT / ".venv-bpy42" / "bin" / "python"), str(script), size_opt,
-                        str(grid), out_opt, str(path)], check=True, cwd=ROOT)
+        # bpy 4.2 may crash on exit after the file is saved (make_cornell_box.py: SIGSEGV,
+        # 2026-11-26): the file is what counts.
+        proc = subprocess.run([str(ROOT / ".venv-bpy42" / "bin" / "python"), str(script),
+                               size_opt, str(grid), out_opt, str(path)], cwd=ROOT)
+        if not path.exists():
+            raise RuntimeError("%s did not write %s (exit status %d)" % (script.name, path,
+                                                                        proc.returncode))
     return path
 
 

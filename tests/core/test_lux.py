@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from builders import box_quads, centred_square
-from core import BakeSettings, bake, make_lights, make_scene, scene_from_polygons
+from core import BakeSettings, bake, make_lights, make_scene, relight, scene_from_polygons
 from core import lux as L
 
 LM = L.LUMENS_PER_WATT
@@ -146,3 +146,21 @@ def test_bad_points_are_refused():
         L.illuminance_at(object(), np.zeros((1, 3)), np.ones((1, 3)))
     with pytest.raises(ValueError, match="face"):
         L.calculation_grid([np.zeros((2, 3))])
+
+
+@pytest.mark.parametrize("mode", ["mesh", "vertices"])
+def test_relight_scales_lux_with_the_emission(mode):
+    # Light is linear in the emission: a relight at 2.5 x the panel's radiance reads 2.5 x the
+    # lux everywhere (corners and free points); rounding only.
+    panel = centred_square(0.0, 0.0, 1.5, 1.0, facing_up=False)
+    V = np.concatenate([centred_square(0.0, 0.0, 0.0, 4.0), panel])
+    scene = scene_from_polygons(V, [[0, 1, 2, 3], [4, 5, 6, 7]], [0, 1],
+                                reflectance=[[0.6] * 3, [0.2] * 3],
+                                emission=[[0.0] * 3, [4.0] * 3])
+    first = bake(scene, BakeSettings(output_mode=mode))
+    again = relight(first, emission=[[0.0] * 3, [10.0] * 3])
+    np.testing.assert_allclose(L.lux(again.corner_incident), 2.5 * L.lux(first.corner_incident),
+                               rtol=1e-9, atol=1e-9)
+    pts, nrm, _ = L.calculation_grid([centred_square(0.0, 0.0, 0.7, 2.0)])
+    np.testing.assert_allclose(L.illuminance_at(again, pts, nrm),
+                               2.5 * L.illuminance_at(first, pts, nrm), rtol=1e-9)
