@@ -95,17 +95,30 @@ def test_auto_keeps_the_hemicube_for_a_wide_lamp():
 
 
 #: The hemicube at R = 256 sees a 0.3 m lamp 3 m away over ~20 pixels: its mean over the floor
-#: agrees with the exact direct light to about 1 % (measured 1.1 % at R = 256; 7.6 % at R = 64).
+#: agrees with the exact direct light to about 1 % (measured 1.1 % at R = 256; 7.6 % at R = 64;
+#: 0.05 % on the area-weighted mean below, 2026-11-26).
 MEAN_RTOL = 0.03
+
+
+def _floor_mean(result):
+    """Area-weighted mean red radiance over the floor's output faces (each face's corner mean):
+    the two bakes refine differently, so a plain mean over corners weighs their meshes."""
+    m = result.output
+    total = weight = 0.0
+    for f in np.flatnonzero(m.face_parent == 0):
+        c = np.arange(m.face_starts[f], m.face_starts[f] + m.face_sizes[f])
+        p = m.vertices[m.corner_verts[c]]
+        area = 0.5 * np.linalg.norm(np.cross(p - p[0], np.roll(p, -1, axis=0) - p[0]).sum(0))
+        total += area * m.corner_colours[c, 0].mean()
+        weight += area
+    return total / weight
 
 
 def test_exact_and_hemicube_agree_on_average_with_interreflection():
     scene, _ = _room(0.3, walls_rho=0.5, box=True)
     exact = bake(scene, BakeSettings(exact_direct="all"))
     cube = bake(scene, BakeSettings(exact_direct="off", resolution=256))
-    _, a = _floor_values(exact)
-    _, b = _floor_values(cube)
-    assert a.mean() == pytest.approx(b.mean(), rel=MEAN_RTOL)
+    assert _floor_mean(exact) == pytest.approx(_floor_mean(cube), rel=MEAN_RTOL)
     e = exact.report["energy"]
     # Closed room: the exact emitter's power is all absorbed (up to the solver tolerance and the
     # shadow rays' sampling of the patches' direct light).
