@@ -39,9 +39,11 @@ from .criteria import (SHADOW_SAMPLES, EmitterSamples, contact_edges, contact_po
 from .duplicates import copy_duplicate_faces
 from .elements import bake_elements
 from .gather import borrow_at_vertex, NORMAL_DECIMALS, corner_groups, shade
-from .geometry import patch_extents, spatial_order
+from .farfield import FarField, Seen, seen_subset
+from .geometry import spatial_order
 from .hemicube import point_rows
 from .hierarchy import ElementTree, output_mesh
+from .parallel import Deferred
 from .progress import SubMonitor
 from .rows import RowStore, compact_rows
 from .scene import make_scene
@@ -66,13 +68,6 @@ BUDGET_RETRIES = 6
 #: Hemicubes per point_rows call.
 GATHER_BATCH = 64
 
-#: A gather batch draws a solved patch whole, instead of its receiver elements, when it lies
-#: farther than this many times its size from every point of the batch: there it covers a few
-#: hemicube pixels, and its form factor is spread over its elements by area (exact for the
-#: gathered light when the form-factor kernel is flat across the patch; the kernel varies by
-#: (1 + 1/FAR_FIELD)^2 across it at worst).
-FAR_FIELD = 4.0
-
 #: Inset directions of per-corner (alone) gathers are matched after rounding to these decimals.
 DIRECTION_DECIMALS = 2
 
@@ -91,100 +86,6 @@ def coarse_patch_size(scene, patch_size=None):
     return float(np.clip(COARSE_PATCH, COARSE_MIN_FRACTION * diag, COARSE_MAX_FRACTION * diag))
 
 
-class _Seen:
-    """The patches a gather draws (what :func:`core.hemicube.point_rows` reads), a subset."""
-
-    def __init__(self, patches, keep):
-        self.keep = keep
-        self.centres = patches.centres[keep]
-        self.normals = patches.normals[keep]
-        self.corners = patches.corners[keep]
-        self.areas = patches.areas[keep]
-
-    def radiance(self, node_radiance):
-        """(2K, 3) radiance of the kept nodes from the full (2P, 3)."""
-        P = node_radiance.shape[0] // 2
-        return np.concatenate([node_radiance[self.keep], node_radiance[P + self.keep]])
-
-
-class _Drawn:
-    """A Patches-like concatenation of whole patches and elements (what one batch draws)."""
-
-    def __init__(self, *parts):
-        self.centres = np.concatenate([p.centres for p in parts])
-        self.normals = np.concatenate([p.normals for p in parts])
-        self.corners = np.concatenate([p.corners for p in parts])
-        self.areas = np.concatenate([p.areas for p in parts])
-
-
-class FarField:
-    """Gather rows with far patches drawn whole (:data:`FAR_FIELD`), returned against the seen
-    elements' columns.
-
-    Parameters
-    ----------
-    patches : core.patches.Patches
-        The solved patches (P).
-    seen : _Seen
-        The drawn elements (K of them, a subset of the receiver elements).
-    parent : (K,) int64
-        Patch of each seen element.
-    """
-
-    def __init__(self, patches, seen, parent):
-        self.patches, self.seen, self.parent = patches, seen, parent
-        P = patches.areas.size
-        self.has = np.zeros(P, dtype=bool)
-        self.has[parent] = True
-        self.weight = seen.areas / patches.areas[parent]
-        self.radius, self.size = patch_extents(patches.corners, patches.centres)
-        self.drawn_items = 0
-        self._last = None                      # (far mask, _Drawn) of the last batch
-
-    def rows(self, points, normals, **kw):
-        """(S, 2K) rows of ``points`` against the seen elements' nodes."""
-        lo, hi = points.min(axis=0), points.max(axis=0)
-        centres = self.patches.centres
-        gap = np.linalg.norm(centres - np.clip(centres, lo, hi), axis=1) - self.radius
-        far = self.has & (gap > FAR_FIELD * self.size)
-        if not far.any():
-            self.drawn_items += self.parent.size
-            return point_rows(self.seen, points, normals, **kw)
-        whole = np.flatnonzero(far)
-        near = np.flatnonzero(~far[self.parent])
-        if self._last is None or not np.array_equal(self._last[0], far):
-            # Neighbouring batches (Z order) mostly share their far set: one object for them
-            # keeps point_rows' set-up cache (by identity) warm.
-            self._last = (far, _Drawn(_Seen(self.patches, whole), _Seen(self.seen, near)))
-        drawn = self._last[1]
-        self.drawn_items += whole.size + near.size
-        mixed = point_rows(drawn, points, normals, **kw)            # (S, 2D)
-        D, K, W = whole.size + near.size, self.parent.size, whole.size
-        out = np.zeros((points.shape[0], 2 * K))
-        out[:, near] = mixed[:, W:D]
-        out[:, K + near] = mixed[:, D + W:]
-        slot = np.full(far.size, -1, dtype=np.int64)
-        slot[whole] = np.arange(W)
-        child = np.flatnonzero(far[self.parent])
-        col = slot[self.parent[child]]
-        out[:, child] = mixed[:, col] * self.weight[child]
-        out[:, K + child] = mixed[:, D + col] * self.weight[child]
-        return out
-
-
-def _seen_subset(patches, radiance, power):
-    """The patches the gathers draw: those whose front or back node has light.
-
-    A patch that light never reaches on either side cannot stand between a lit point and a lit
-    patch (the lit patch would light it), so leaving it out changes no row that matters, and
-    a 100 x 100 m ground plane outside a closed room no longer slows every hemicube.
-    """
-    P = patches.areas.size
-    has = np.any(radiance[:P] > 0, axis=1) | np.any(radiance[P:] > 0, axis=1) \
-        | np.any(power[:P] > 0, axis=1) | np.any(power[P:] > 0, axis=1)
-    return _Seen(patches, np.flatnonzero(has))
-
-
 class AdaptiveState:
     """What relight needs: the output mesh and the gather rows of its corner groups.
 
@@ -200,7 +101,7 @@ class AdaptiveState:
     lit : (P,) bool
         Patches that received light in the bake (relight rebuilds the mesh if more do).
     elements : core.elements.Elements or None
-    seen : _Seen
+    seen : Seen
         The (lit) patches or elements the gathers drew.
     user : (C,) int64
         Output corner whose colour each user corner takes (-1: none, a dropped face).
@@ -370,9 +271,9 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
     if elements is not None:                 # an element has light if its patch has
         power = np.concatenate([power[elements.parent], power[P + elements.parent]])
     if scene.world is None:         # with a world, unlit surfaces still hide the sky
-        seen = _seen_subset(seen, seen_L, power)
+        seen = seen_subset(seen, seen_L, power)
     else:
-        seen = _Seen(seen, np.arange(seen.areas.size))
+        seen = Seen(seen, np.arange(seen.areas.size))
     seen_L = seen.radiance(seen_L)
     far_field = None
     if elements is not None:
@@ -410,23 +311,34 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         vis = np.zeros(new.size, dtype=np.int64)
         batches = []
         pos_in_new = np.searchsorted(new, go)
-        for s in range(0, go.size, GATHER_BATCH):
-            g = go[s:s + GATHER_BATCH]
-            kw = dict(resolution=settings.resolution, rotate=settings.rotate_hemicube, rng=rng)
-            if not seen.areas.size:     # nothing lit to see (exact emitters light a black room)
-                rows = np.zeros((g.size, 0), dtype=np.float32)
-            elif far_field is None:
-                rows = point_rows(seen, groups.points[g], groups.normals[g], **kw)
-            else:
-                rows = far_field.rows(groups.points[g], groups.normals[g], **kw)
-            cols, vals = compact_rows(rows)
-            inc[pos_in_new[s:s + GATHER_BATCH]] = vals.astype(np.float64) @ seen_L[cols]
-            covered[pos_in_new[s:s + GATHER_BATCH]] = rows.sum(axis=1)
-            batches.append((pos_in_new[s:s + GATHER_BATCH], cols, vals))
-            if gather_monitor is not None:
-                done = (s + g.size) / go.size        # level k fills [1 - 2^-k, 1 - 2^-(k+1)]
-                gather_monitor.update(1.0 - 0.5 ** level * (1.0 - 0.5 * done),
-                                      f"mesh: level {level}, {tree.points.shape[0]} points")
+        # Each batch's hemicubes start (on the worker processes, if the bake uses them) before
+        # the previous batch's rows are used, so this process prepares the next batch
+        # meanwhile; batches are used in order, so nothing depends on the timing.
+        started = None
+        for s in range(0, go.size + GATHER_BATCH, GATHER_BATCH):
+            ahead = None
+            if s < go.size:
+                g = go[s:s + GATHER_BATCH]
+                kw = dict(resolution=settings.resolution, rotate=settings.rotate_hemicube,
+                          rng=rng, later=True)
+                if not seen.areas.size:  # nothing lit to see (exact emitters light a black room)
+                    ahead = Deferred(lambda n=g.size: np.zeros((n, 0), dtype=np.float32))
+                elif far_field is None:
+                    ahead = point_rows(seen, groups.points[g], groups.normals[g], **kw)
+                else:
+                    ahead = far_field.rows(groups.points[g], groups.normals[g], **kw)
+            if started is not None:
+                s0, rows = started[0], started[1].result()
+                cols, vals = compact_rows(rows)
+                at = pos_in_new[s0:s0 + GATHER_BATCH]
+                inc[at] = vals.astype(np.float64) @ seen_L[cols]
+                covered[at] = rows.sum(axis=1)
+                batches.append((at, cols, vals))
+                if gather_monitor is not None:
+                    done = (s0 + rows.shape[0]) / go.size  # level k: [1 - 2^-k, 1 - 2^-(k+1)]
+                    gather_monitor.update(1.0 - 0.5 ** level * (1.0 - 0.5 * done),
+                                          f"mesh: level {level}, {tree.points.shape[0]} points")
+            started = None if ahead is None else (s, ahead)
         if go.size:
             vis[pos_in_new] = emitters.visibility(groups.points[go], groups.normals[go])
             if direct is not None:

@@ -28,6 +28,7 @@ from .emitters import Emitters, exact_materials
 from .lights import DirectLight
 from .duplicates import (duplicate_warning, fill_duplicate_colours, merge_duplicates,
                          near_duplicate_warning)
+from . import parallel
 from .orient import orient
 from .patches import make_patches, subdivide_patches
 from .pipeline import (check_result, colours, form_factors, gathered_incident, make_gather,
@@ -122,6 +123,18 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     settings = BakeSettings() if settings is None else settings
     if not isinstance(settings, BakeSettings):
         raise TypeError(f"settings must be a BakeSettings; got {type(settings).__name__}")
+    with parallel.using(settings.workers, cancel) as shared:
+        result = _bake(scene, settings, progress, cancel)
+    result.report["workers"] = dict(processes=shared["processes"], shared_calls=shared["calls"])
+    if shared["problem"] is not None:
+        result.report["workers"]["problem"] = shared["problem"]
+        result.report.setdefault("warnings", []).append(
+            f"workers: {shared['problem']}; this process computed the rest (same result)")
+    return result
+
+
+def _bake(scene, settings, progress, cancel):
+    """:func:`bake` with its settings checked, inside its worker pool's context."""
     t_start = time.perf_counter()
     progress = _non_decreasing(progress)   # a second solve (flipped faces) starts over
     if settings.patch_size is None:
@@ -310,17 +323,18 @@ def relight(result, *, reflectance=None, emission=None, progress=None, cancel=No
         # The exact emitters' light is kept summed at every point: it is cast again, and the
         # gathers that hold it are made again (the form factors are kept).
         state = dataclasses.replace(state, direct=None, gather=None)
-    if state.store is None:     # a matrix-free bake kept no form factors
-        monitor.stage(*_STAGES["patches"])
-        monitor.update(1.0, "patches")
+    with parallel.using(st.workers, cancel):
+        if state.store is None:     # a matrix-free bake kept no form factors
+            monitor.stage(*_STAGES["patches"])
+            monitor.update(1.0, "patches")
+            return _run(new_scene, state.settings, state.patches, monitor, t_start=t_start,
+                        timings={"patches": 0.0}, on_contact=state.on_contact,
+                        contact_lines=state.contact_lines,
+                        warnings=["relight: the bake kept no form factors (matrix-free "
+                                  "progressive): they were recomputed"])
         return _run(new_scene, state.settings, state.patches, monitor, t_start=t_start,
-                    timings={"patches": 0.0}, on_contact=state.on_contact,
-                    contact_lines=state.contact_lines,
-                    warnings=["relight: the bake kept no form factors (matrix-free "
-                              "progressive): they were recomputed"])
-    return _run(new_scene, state.settings, state.patches, monitor, t_start=t_start,
-                timings={"patches": 0.0}, kept=state, on_contact=state.on_contact,
-                contact_lines=state.contact_lines)
+                    timings={"patches": 0.0}, kept=state, on_contact=state.on_contact,
+                    contact_lines=state.contact_lines)
 
 
 def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_contact=None,

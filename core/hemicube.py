@@ -20,6 +20,7 @@ import numpy as np
 from .constants import tol
 from .hemicube_delta import FACE_NAMES, check_resolution, delta_form_factors  # noqa: F401
 from .hemicube_chunk import Geometry, Scene, rows_in_chunks
+from .parallel import Deferred, submit
 from .patches import patch_triangles, triangle_mask
 from .validate import check_bool, check_sources, is_int
 
@@ -240,7 +241,7 @@ def hemicube_rows(patches, sources, *, resolution=64, rotate=False, rng=None, cu
                         _geometry=geometry)
 
 
-def point_rows(patches, points, normals, *, resolution=64, rotate=False, rng=None):
+def point_rows(patches, points, normals, *, resolution=64, rotate=False, rng=None, later=False):
     """Hemicube rows from arbitrary points: what each point sees of every node.
 
     The receiver is a point, so the hemicube has no proximity error here (that error comes from
@@ -257,6 +258,11 @@ def point_rows(patches, points, normals, *, resolution=64, rotate=False, rng=Non
         Unit viewing normals.
     resolution, rotate, rng
         As :func:`hemicube_rows`.
+    later : bool, optional
+        Return a :class:`core.parallel.Deferred` of the rows: started now on the bake's worker
+        processes, if it uses them, so that the caller can prepare its next call meanwhile
+        (the random rotations are drawn now, so the rows do not depend on when they are asked
+        for).
 
     Returns
     -------
@@ -280,7 +286,7 @@ def point_rows(patches, points, normals, *, resolution=64, rotate=False, rng=Non
     n_patches = n_normals.shape[0]
     out = np.zeros((points.shape[0], 2 * n_patches))
     if points.shape[0] == 0:
-        return out
+        return Deferred(lambda: out) if later else out
     polys, poly_patch, geometry = drawn_polygons(patches, n_normals)
     sc = Scene(geometry, n_patches, resolution, False)
     z = normals
@@ -294,6 +300,16 @@ def point_rows(patches, points, normals, *, resolution=64, rotate=False, rng=Non
         x, y = c * x + s_ * y, c * y - s_ * x
     frames = np.stack([x, y, z], axis=1)
     eyes = points + (tol.surface_offset * sc.diag) * z
+    if later:
+        started = submit(sc, eyes, frames, out)
+        if started is not None:
+            return started
+        return Deferred(lambda: _filled(sc, eyes, frames, out))
+    rows_in_chunks(sc, eyes, frames, out, None)
+    return out
+
+
+def _filled(sc, eyes, frames, out):
     rows_in_chunks(sc, eyes, frames, out, None)
     return out
 

@@ -318,6 +318,12 @@ TABLE = (
             exposed=True,
             doc="At most 64 emissive faces and 10 % of the surfaces' area, by material "
                 "(core.emitters); the hemicube then carries only what they reflect."),
+    Setting("workers", "int", None, "Workers",
+            "Processes that compute the hemicubes; auto (0 in the panel): one per core; 1: "
+            "this process only. The result is the same for any number", low=1, high=256,
+            exposed=True, auto=True,
+            doc="core.parallel: form-factor rows, element and vertex gathers; bit-identical to "
+                "one process."),
     Setting("vertex_budget", "int", 100_000, "Vertex Budget",
             "Radiosity mesh: most output vertices; the worst elements are split first", low=4,
             soft=(1000, 1_000_000), exposed=True,

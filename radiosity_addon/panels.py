@@ -114,6 +114,7 @@ def draw_advanced(layout, props):
     col.prop(props, "tolerance")
     col.prop(props, "max_iterations", text="Iteration Cap")
     layout.prop(props, "light_samples")
+    layout.prop(props, "workers", text="Workers (auto)" if props.workers == 0 else "Workers")
     _split_row(layout, "Emitters").prop(props, "exact_direct", text="")
     col = layout.column()
     col.prop(props, "contact_cuts")
@@ -162,6 +163,9 @@ def summary_lines(text):
     residual = report.get("residual")
     res_text = f", residual {residual:.2g}" if isinstance(residual, (int, float)) else ""
     lines.append((f"Iterations: {report.get('iterations', '?')}{res_text}", "NONE"))
+    workers = report.get("workers")
+    if isinstance(workers, dict) and isinstance(workers.get("processes"), int):
+        lines.append((f"Workers: {workers['processes']} processes", "NONE"))
     written = report.get("output_objects")
     if written:          # radiosity mesh output: what the user's faces became
         faces_in = sum(o.get("input_faces", 0) for o in written)

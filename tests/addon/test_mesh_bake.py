@@ -107,3 +107,30 @@ def test_duplicate_floor_object_keeps_a_baked_surface(package):
     assert abs(ca.mean() - cb.mean()) < 1e-6 * ca.mean() and ca.mean() > 0
     assert bpy.ops.radiosity.clear() == {"FINISHED"}
     assert len(copy.data.polygons) == 1
+
+
+def test_a_bake_from_the_extension_shares_its_hemicubes_with_plain_python_workers(package):
+    # The add-on's core is imported under the extension's package name and next to bpy; its
+    # worker processes import the same files as the top-level package "core" and never bpy
+    # (core.parallel), and the result is the same bits as a bake in one process.
+    parallel = importlib.import_module(PACKAGE.__name__ + ".core.parallel")
+    parallel.close()
+    one_quad_room()
+    set_settings(bpy.context.scene, resolution=32, workers=2)
+    assert bpy.ops.radiosity.bake() == {"FINISHED"}
+    report = json.loads(bpy.context.scene.radiosity.last_report)
+    shared = [read_colours(o.data) for o in bpy.data.objects if o.type == "MESH"]
+    assert report["workers"]["processes"] == 2 and report["workers"]["shared_calls"] > 0
+    assert report["settings"]["workers"] == 2
+    pool = parallel._pool[0]
+    assert parallel.__name__ != "core.parallel" and len(pool.ready) == 2
+    assert all(r["module"] == "core.parallel" and r["bpy"] is False for r in pool.ready)
+    assert bpy.ops.radiosity.clear() == {"FINISHED"}
+    set_settings(bpy.context.scene, resolution=32, workers=1)
+    assert bpy.ops.radiosity.bake() == {"FINISHED"}
+    report = json.loads(bpy.context.scene.radiosity.last_report)
+    assert report["workers"] == dict(processes=1, shared_calls=0)
+    alone = [read_colours(o.data) for o in bpy.data.objects if o.type == "MESH"]
+    assert len(alone) == len(shared) == 2
+    assert all(np.array_equal(a, b) for a, b in zip(alone, shared))
+    parallel.close()

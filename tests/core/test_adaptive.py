@@ -306,7 +306,7 @@ def test_far_patches_drawn_whole_gather_what_their_elements_would():
     # every point of the batch, its form factor spread over its elements by area. Against drawing
     # every element (same rotations): the difference is the form-factor kernel's variation across
     # a far patch times the light's variation across it, here a steep synthetic gradient.
-    from core.adaptive import FarField
+    from core.farfield import FarField
     from core.hemicube import point_rows
     from core.patches import make_patches, subdivide_patches
 

@@ -87,6 +87,10 @@ def test_button_bakes_with_progress_and_writes_colours(session):
         assert stats["finite"] and stats["min"] >= 0 and stats["max"] > 0, (name, stats)
     report = json.loads(results["last_report"])
     assert report["patches"] > 0 and report["timings"]["total"] > 0
+    # Workers (auto: one per core) started from Blender's own Python, not the blender binary.
+    if (os.cpu_count() or 1) >= 2:
+        assert report["workers"]["processes"] >= 2, report["workers"]
+    assert not [w for w in report.get("warnings", []) if w.startswith("workers:")]
 
 
 def test_escape_cancels_within_a_second_and_changes_nothing(session):

@@ -1,0 +1,412 @@
+"""Worker processes for the hemicube kernel: every core, results bit-identical to one process.
+
+A bake runs inside :func:`using` (:func:`core.bake.bake` does). Inside it,
+:func:`core.hemicube_chunk.rows_in_chunks` hands every call large enough to share to
+:func:`share`: the eyes are cut into one contiguous part per worker, each worker computes its
+part's rows with the same code, and the parts are put back in order. A row depends only on its
+own eye, never on which eyes share a chunk (``tests/core/test_parallel.py`` checks it), so the
+result is bit-identical to a bake in one process. The hemicube kernel is where a bake spends its
+time: the patches' form-factor rows, the element gathers and the output vertices' gathers.
+
+**How workers start.** Each is a Python process started with the interpreter this process runs on
+(``sys.executable``: inside Blender, the Python that Blender reports; with the bpy module, the
+virtual environment's), which imports this package as the top-level ``core`` from its parent
+folder. So a worker never imports bpy and never the extension's package name (``bl_ext.…``),
+and nothing re-imports the main script, which is what makes ``multiprocessing``'s spawn fail
+under Blender. Messages are pickles over the workers' stdin and stdout; a worker's own prints go
+to its stderr. The polygons are sent once per set of patches, the eyes with every call.
+
+**Lifetime.** One pool per process, started at the first call worth sharing and kept between
+bakes (a start costs about 0.3 s per worker); closed at exit. A cancel kills the workers at once
+(the wait polls the cancel check every :data:`WAIT_STEP` seconds) and the next bake starts new
+ones. If workers cannot start (no Python interpreter found, an import error), the bake runs in
+this process and its report says why.
+"""
+
+import atexit
+import collections
+import contextlib
+import itertools
+import os
+import pickle
+import queue
+import struct
+import subprocess
+import sys
+import threading
+import traceback
+import weakref
+
+import numpy as np
+
+from .errors import BakeCancelled
+
+#: Seconds between two looks at the cancel check while the workers compute.
+WAIT_STEP = 0.05
+
+#: Fewest eyes a worker is given: below this the messages cost more than the hemicubes (one
+#: hemicube is about 1 ms at R = 64 over a thousand patches; a message under 1 ms).
+MIN_EYES = 8
+
+#: Seconds a starting worker has to import NumPy and this package and say it is ready.
+START_TIMEOUT = 60.0
+
+#: Sets of polygons a worker keeps (a bake alternates between a few: the patches, the receiver
+#: elements, a gather's far-field mix).
+KEPT_GEOMETRIES = 4
+
+_HEADER = struct.Struct("<Q")
+_local = threading.local()
+_pool_lock = threading.Lock()
+_pool = [None]              # the process's Pool, or None
+_tokens = weakref.WeakKeyDictionary()
+_next_token = itertools.count(1)
+
+
+def cpu_count():
+    """Cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def resolve(workers):
+    """Worker processes for the ``workers`` setting: None (auto) is one per core."""
+    return cpu_count() if workers is None else int(workers)
+
+
+@contextlib.contextmanager
+def using(workers, cancel=None):
+    """Within the block, this thread's hemicube calls are shared among ``workers`` processes
+    (None: one per core; 1: none). ``cancel`` is the bake's cancel check. Yields a dict that
+    the calls fill: ``processes`` (most workers that computed one call's rows), ``calls`` and
+    ``problem`` (why the workers could not be used, or None).
+
+    One bake at a time uses the process's pool: a bake in another thread meanwhile runs in its
+    own process only."""
+    n = resolve(workers)
+    stats = dict(processes=1, calls=0, problem=None)
+    previous = getattr(_local, "context", None)
+    owner = n > 1 and previous is None and _pool_lock.acquire(blocking=False)
+    if n > 1 and previous is None and not owner:
+        stats["problem"] = "another bake in this process is using the workers"
+    _local.context = _Context(n, cancel, stats) if owner else None
+    try:
+        yield stats
+    finally:
+        _local.context = previous
+        if owner:
+            pool = _pool[0]
+            if pool is not None and pool.pending:   # left uncollected (an error): unknown state
+                pool.close()
+                _pool[0] = None
+            _pool_lock.release()
+
+
+class _Context:
+    """The pool settings of one bake (held by the thread that runs it)."""
+
+    def __init__(self, n, cancel, stats):
+        self.n, self.cancel, self.stats = n, cancel, stats
+
+    def pool(self):
+        """The process's pool with ``n`` workers, started if need be; None if it cannot be."""
+        if self.stats["problem"] is not None:
+            return None
+        pool = _pool[0]
+        if pool is None or not pool.alive() or pool.size != self.n:
+            if pool is not None:
+                pool.close()
+            _pool[0] = None
+            try:
+                _pool[0] = pool = Pool(self.n)
+            except WorkerError as exc:
+                self.stats["problem"] = str(exc)
+                return None
+        return pool
+
+
+class Deferred:
+    """A value computed when first asked for (:meth:`result`), in the order the caller asks."""
+
+    def __init__(self, get):
+        self._get, self._value = get, None
+
+    def result(self):
+        if self._get is not None:
+            self._value, self._get = self._get(), None
+        return self._value
+
+    def then(self, f):
+        """A Deferred of ``f(self.result())``."""
+        return Deferred(lambda: f(self.result()))
+
+
+def submit(sc, eyes, frames, out):
+    """Start the rows of ``eyes`` on the workers; a Deferred that fills ``out`` and returns it,
+    or None when this call is not shared (no pool in use, too few eyes, no workers): the
+    caller then computes the rows itself. Deferreds must be resolved in the order submitted."""
+    context = getattr(_local, "context", None)
+    if context is None or eyes.shape[0] < 2 * MIN_EYES:
+        return None
+    pool = context.pool()
+    if pool is None:
+        return None
+    parts = min(context.n, eyes.shape[0] // MIN_EYES)
+    try:
+        job = pool.submit(sc, eyes, frames, parts)
+    except WorkerError as exc:
+        context.stats["problem"] = str(exc)
+        return None
+    stats = context.stats
+    stats["processes"] = max(stats["processes"], parts)
+    stats["calls"] += 1
+
+    def collect():
+        try:
+            return pool.collect(job, out, context.cancel)
+        except WorkerError as exc:     # a worker died or failed: this process does the rest
+            stats["problem"] = str(exc)
+            from .hemicube_chunk import rows_in_chunks
+            rows_in_chunks(sc, eyes, frames, out, None)
+            return out
+    return Deferred(collect)
+
+
+def share(sc, eyes, frames, out):
+    """Fill ``out`` with the rows of ``eyes`` from the workers now; False when the call is not
+    shared (see :func:`submit`)."""
+    job = submit(sc, eyes, frames, out)
+    if job is None:
+        return False
+    job.result()
+    return True
+
+
+def close():
+    """Stop the process's workers (they start again when next needed)."""
+    with _pool_lock:
+        if _pool[0] is not None:
+            _pool[0].close()
+            _pool[0] = None
+
+
+atexit.register(close)
+
+
+class WorkerError(RuntimeError):
+    """A worker could not start, or failed; the message carries its own traceback."""
+
+
+def _token(geometry):
+    """A number naming ``geometry`` (a core.hemicube_chunk.Geometry) for as long as it lives."""
+    token = _tokens.get(geometry)
+    if token is None:
+        token = _tokens[geometry] = next(_next_token)
+    return token
+
+
+def _command():
+    """The command that starts one worker, or WorkerError when no interpreter can be found."""
+    exe = sys.executable or ""
+    if "python" not in os.path.basename(exe).lower():
+        base = getattr(sys, "_base_executable", "") or ""
+        exe = base if "python" in os.path.basename(base).lower() else ""
+    if not exe or not os.path.exists(exe):
+        raise WorkerError(f"no Python interpreter to start workers with (sys.executable is "
+                          f"{sys.executable!r})")
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    code = (f"import sys; sys.path.insert(0, {root!r}); "
+            "from core.parallel import serve; serve()")
+    return [exe, "-c", code]
+
+
+def _send(stream, message):
+    data = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
+    stream.write(_HEADER.pack(len(data)))
+    stream.write(data)
+    stream.flush()
+
+
+def _receive(stream):
+    """The next message, or None at the end of the stream."""
+    head = stream.read(_HEADER.size)
+    if len(head) < _HEADER.size:
+        return None
+    (size,) = _HEADER.unpack(head)
+    data = stream.read(size)
+    if len(data) < size:
+        return None
+    return pickle.loads(data)
+
+
+class _Worker:
+    """One worker process, and a thread that reads its answers into a queue (portable: waiting
+    on a queue with a timeout works on every platform, select on pipes does not)."""
+
+    def __init__(self, command, env):
+        self.proc = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     env=env)
+        self.answers = queue.Queue()
+        self.kept = collections.deque()         # geometry tokens the worker holds, oldest first
+        self.reader = threading.Thread(target=self._read, daemon=True)
+        self.reader.start()
+
+    def _read(self):
+        try:
+            while True:
+                message = _receive(self.proc.stdout)
+                self.answers.put(message)
+                if message is None:
+                    return
+        except (OSError, ValueError, EOFError, pickle.UnpicklingError):
+            self.answers.put(None)
+
+    def send(self, message):
+        _send(self.proc.stdin, message)
+
+    def kill(self):
+        for stream in (self.proc.stdin,):
+            try:
+                stream.close()
+            except OSError:
+                pass
+        if self.proc.poll() is None:
+            self.proc.kill()
+        try:
+            self.proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            pass
+
+
+class Pool:
+    """``size`` worker processes, started and checked ready (WorkerError if they cannot be)."""
+
+    def __init__(self, size):
+        self.size = int(size)
+        command = _command()
+        env = dict(os.environ)
+        # One thread per worker: the pool already fills the cores.
+        for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+            env[name] = "1"
+        self.workers = []
+        self.pending = collections.deque()      # submitted jobs not yet collected, in order
+        self.ready = []                         # each worker's first message (pid, module)
+        try:
+            for _ in range(self.size):
+                self.workers.append(_Worker(command, env))
+            for worker in self.workers:
+                try:
+                    answer = worker.answers.get(timeout=START_TIMEOUT)
+                except queue.Empty:
+                    answer = None
+                if not (isinstance(answer, tuple) and answer[0] == "ready"):
+                    raise WorkerError(f"a worker process did not start ({command[0]}); see the "
+                                      "console for its error")
+                self.ready.append(answer[1])
+        except BaseException:
+            self.close()
+            raise
+
+    def alive(self):
+        return bool(self.workers) and all(w.proc.poll() is None for w in self.workers)
+
+    def close(self):
+        self.pending.clear()
+        workers, self.workers = self.workers, []
+        for worker in workers:
+            worker.kill()
+
+    def submit(self, sc, eyes, frames, parts):
+        """Send ``parts`` contiguous parts of ``eyes`` to the first ``parts`` workers; the job
+        (the parts' bounds) for :meth:`collect`."""
+        token = _token(sc.geometry)
+        bounds = np.linspace(0, eyes.shape[0], parts + 1).round().astype(np.int64)
+        scalars = dict(n_patches=sc.n_patches, resolution=sc.r, cull_back=sc.cull_back,
+                       near=sc.near)
+        job = (next(_next_token), bounds)
+        self.pending.append(job[0])
+        try:
+            for k in range(parts):
+                worker = self.workers[k]
+                if token not in worker.kept:
+                    worker.send(("geometry", token, dict(vars(sc.geometry))))
+                    worker.kept.append(token)
+                    if len(worker.kept) > KEPT_GEOMETRIES:
+                        worker.kept.popleft()
+                lo, hi = bounds[k], bounds[k + 1]
+                worker.send(("rows", token, scalars, eyes[lo:hi], frames[lo:hi]))
+        except (OSError, ValueError) as exc:
+            self.close()
+            raise WorkerError(f"a worker process stopped: {exc}") from exc
+        return job
+
+    def collect(self, job, out, cancel):
+        """The rows of a submitted ``job`` into ``out`` (returned); BakeCancelled when ``cancel``
+        says so (the workers are killed), WorkerError when one fails."""
+        ident, bounds = job
+        if not self.workers:
+            raise WorkerError("the workers were stopped by an earlier failure")
+        if not self.pending or self.pending[0] != ident:
+            raise RuntimeError("worker jobs must be collected in the order they were submitted")
+        done = False
+        try:
+            for k in range(bounds.size - 1):
+                out[bounds[k]:bounds[k + 1]] = self._answer(self.workers[k], cancel)
+            done = True
+        finally:
+            if done:
+                self.pending.popleft()
+            else:       # cancelled, failed or interrupted: the workers' state is unknown
+                self.close()
+        return out
+
+    @staticmethod
+    def _answer(worker, cancel):
+        while True:
+            if cancel is not None and cancel():
+                raise BakeCancelled("bake cancelled")
+            try:
+                answer = worker.answers.get(timeout=WAIT_STEP)
+            except queue.Empty:
+                continue
+            if answer is None:
+                raise WorkerError(f"worker process {worker.proc.pid} exited "
+                                  f"(code {worker.proc.poll()})")
+            if answer[0] == "error":
+                raise WorkerError(f"worker process {worker.proc.pid} failed:\n{answer[1]}")
+            return answer[1]
+
+
+def serve():
+    """A worker's main loop: answer messages on stdin until it closes."""
+    from .hemicube_chunk import Geometry, Scene, rows_in_chunks
+
+    source = sys.stdin.buffer
+    sink = os.fdopen(os.dup(sys.stdout.fileno()), "wb")
+    os.dup2(sys.stderr.fileno(), sys.stdout.fileno())        # stray prints go to stderr
+    kept = collections.OrderedDict()
+    _send(sink, ("ready", dict(pid=os.getpid(), module=__name__, bpy="bpy" in sys.modules)))
+    while True:
+        message = _receive(source)
+        if message is None:
+            return
+        try:
+            if message[0] == "geometry":
+                geometry = Geometry.__new__(Geometry)
+                geometry.__dict__.update(message[2])
+                kept[message[1]] = geometry
+                while len(kept) > KEPT_GEOMETRIES:
+                    kept.popitem(last=False)
+                continue
+            _, token, scalars, eyes, frames = message
+            sc = Scene(kept[token], scalars["n_patches"], scalars["resolution"],
+                       scalars["cull_back"])
+            sc.near = scalars["near"]
+            out = np.zeros((eyes.shape[0], 2 * sc.n_patches))
+            rows_in_chunks(sc, eyes, frames, out, None)
+            _send(sink, ("rows", out))
+        except Exception:                          # noqa: BLE001 - reported to the parent
+            _send(sink, ("error", traceback.format_exc()))
+

@@ -1,0 +1,216 @@
+"""Worker processes (core.parallel): the same bits as one process, a prompt cancel, and a bake
+that survives workers that cannot start or die.
+
+The oracle is the bake in one process (``workers=1``): sharing the hemicubes must not change a
+single bit of any output, because a row depends only on its own eye (checked first, by cutting
+the same eyes into different chunks).
+"""
+
+import os
+import signal
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from bench.scenes import room_with_boxes
+from builders import box_quads, quad_patches
+from core import hemicube_chunk, parallel
+from core.bake import BakeSettings, bake
+from core.errors import BakeCancelled
+from core.hemicube import hemicube_rows, point_rows
+
+
+@pytest.fixture
+def room_patches():
+    walls, _ = box_quads((4.0, 3.0, 2.5), 0.5)
+    block, _ = box_quads((1.0, 1.0, 1.0), 0.25)
+    block = block[:, ::-1] + np.array([1.5, 1.0, 0.001])
+    return quad_patches(np.concatenate([walls, block]))
+
+
+@pytest.fixture(autouse=True)
+def fresh_pool():
+    parallel.close()
+    yield
+    parallel.close()
+
+
+def _floor_points(n, seed=1):
+    pts = np.random.default_rng(seed).uniform([0.1, 0.1, 0.0], [3.9, 2.9, 0.0], (n, 3))
+    return pts, np.tile([0.0, 0.0, 1.0], (n, 1))
+
+
+def test_a_row_does_not_depend_on_which_eyes_share_its_chunk(room_patches, monkeypatch):
+    pts, nrm = _floor_points(150)
+    sources = np.arange(0, 2 * room_patches.areas.size, 3)
+    a = point_rows(room_patches, pts, nrm, resolution=32, rotate=True, rng=5)
+    b = hemicube_rows(room_patches, sources, resolution=32, rotate=True, rng=5)
+    for pairs, pixels in ((1, 1), (7000, 70_000), (10**9, 10**9)):
+        monkeypatch.setattr(hemicube_chunk, "_CHUNK_PAIRS", pairs)
+        monkeypatch.setattr(hemicube_chunk, "_CHUNK_PIXELS", pixels)
+        assert np.array_equal(point_rows(room_patches, pts, nrm, resolution=32, rotate=True,
+                                         rng=5), a)
+        assert np.array_equal(hemicube_rows(room_patches, sources, resolution=32, rotate=True,
+                                            rng=5), b)
+
+
+def test_shared_rows_are_the_same_bits(room_patches):
+    pts, nrm = _floor_points(200)
+    alone = point_rows(room_patches, pts, nrm, resolution=32, rotate=True, rng=3)
+    with parallel.using(2) as stats:
+        shared = point_rows(room_patches, pts, nrm, resolution=32, rotate=True, rng=3)
+        later = point_rows(room_patches, pts, nrm, resolution=32, rotate=True, rng=3,
+                           later=True)
+        assert isinstance(later, parallel.Deferred)
+        later = later.result()
+    assert stats["calls"] == 2 and stats["processes"] == 2 and stats["problem"] is None
+    assert np.array_equal(shared, alone) and np.array_equal(later, alone)
+
+
+def _mesh_bake(workers, **kw):
+    scene = room_with_boxes(40)
+    return bake(scene, BakeSettings(workers=workers, vertex_budget=3000, **kw))
+
+
+def _outputs(result):
+    return (result.corner_colours, result.node_radiance, result.output.vertices,
+            result.output.corner_colours, result.output.corner_incident)
+
+
+@pytest.mark.slow
+def test_a_bake_on_two_workers_equals_the_bake_in_one_process():
+    one = _mesh_bake(1)
+    two = _mesh_bake(2)
+    assert one.report["workers"] == dict(processes=1, shared_calls=0)
+    assert two.report["workers"]["processes"] == 2
+    assert two.report["workers"]["shared_calls"] > 10
+    assert all(np.array_equal(a, b) for a, b in zip(_outputs(one), _outputs(two)))
+    assert not any("workers" in w for w in two.report["warnings"])
+
+
+def test_workers_that_cannot_start_leave_the_bake_in_this_process(monkeypatch):
+    monkeypatch.setattr(sys, "executable", "/nonexistent/blender")
+    monkeypatch.setattr(sys, "_base_executable", "/nonexistent/blender", raising=False)
+    result = _mesh_bake(2, element_levels=0)
+    assert result.report["workers"]["processes"] == 1
+    assert "no Python interpreter" in result.report["workers"]["problem"]
+    assert any(w.startswith("workers: no Python interpreter") for w in result.report["warnings"])
+    alone = _mesh_bake(1, element_levels=0)
+    assert all(np.array_equal(a, b) for a, b in zip(_outputs(alone), _outputs(result)))
+
+
+def _worker_pids():
+    pool = parallel._pool[0]
+    return [] if pool is None else [w.proc.pid for w in pool.workers]
+
+
+def _alive(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    # A killed child stays a zombie until reaped; Pool.close reaps it (wait).
+    with open(f"/proc/{pid}/stat") as f:
+        return f.read().split(")")[-1].split()[0] != "Z"
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_a_worker_killed_mid_bake_costs_time_not_the_bake():
+    killed = []
+
+    def kill_one():
+        deadline = time.perf_counter() + 60
+        while not _worker_pids() and time.perf_counter() < deadline:
+            time.sleep(0.01)
+        pids = _worker_pids()
+        if pids:
+            os.kill(pids[0], signal.SIGKILL)
+            killed.append(pids[0])
+
+    thread = threading.Thread(target=kill_one)
+    thread.start()
+    result = _mesh_bake(2)
+    thread.join()
+    assert killed, "no worker ever started"
+    problem = result.report["workers"].get("problem", "")
+    assert f"worker process {killed[0]} exited" in problem, result.report["workers"]
+    assert any(w.startswith(f"workers: worker process {killed[0]} exited")
+               for w in result.report["warnings"])
+    alone = _mesh_bake(1)
+    assert all(np.array_equal(a, b) for a, b in zip(_outputs(alone), _outputs(result)))
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_cancel_reaches_the_workers_within_half_a_second():
+    # Cancel is flipped while the workers compute; the time from the flip until the bake has
+    # raised and every worker process is gone is what a user waits for after Esc.
+    scene = room_with_boxes(1500)
+    flipped = threading.Event()
+    when, pids = {}, []
+
+    def flip():
+        deadline = time.perf_counter() + 60
+        while not _worker_pids() and time.perf_counter() < deadline:
+            time.sleep(0.005)
+        time.sleep(0.3)                 # well inside the form factors (several seconds)
+        pids.extend(_worker_pids())
+        when["t"] = time.perf_counter()
+        flipped.set()
+
+    thread = threading.Thread(target=flip)
+    thread.start()
+    try:
+        with pytest.raises(BakeCancelled):
+            bake(scene, BakeSettings(workers=2, output_mode="vertices", patch_size=1.0),
+                 cancel=flipped.is_set)
+        stopped = time.perf_counter()
+    finally:
+        thread.join()
+    assert len(pids) == 2
+    assert stopped - when["t"] < 0.5, stopped - when["t"]
+    # Every worker is gone, or idle (kept for the next bake): none still computes.
+    before = {p: _cpu_ticks(p) for p in pids}
+    time.sleep(0.5)
+    after = {p: _cpu_ticks(p) for p in pids}
+    busy = {p for p in pids if before[p] is not None and after[p] is not None
+            and after[p] - before[p] > 2}
+    assert not busy, (before, after)
+
+
+def _cpu_ticks(pid):
+    """utime + stime of a live process in clock ticks, None if it is gone."""
+    if not _alive(pid):
+        return None
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().split(")")[-1].split()
+    return int(fields[11]) + int(fields[12])
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_cancel_kills_workers_in_the_middle_of_one_long_call(room_patches):
+    # One call of 6000 hemicubes at R = 128 (about 10 s of work per worker here): the cancel
+    # cannot wait for the call to end; the workers are killed.
+    pts, nrm = _floor_points(6000)
+    flipped = threading.Event()
+    when = {}
+
+    def flip():
+        time.sleep(0.5)
+        when["t"] = time.perf_counter()
+        flipped.set()
+
+    with parallel.using(2, cancel=flipped.is_set):
+        point_rows(room_patches, pts[:64], nrm[:64], resolution=64)     # workers started
+        pids = _worker_pids()
+        thread = threading.Thread(target=flip)
+        thread.start()
+        with pytest.raises(BakeCancelled):
+            point_rows(room_patches, pts, nrm, resolution=128)
+        stopped = time.perf_counter()
+        thread.join()
+    assert len(pids) == 2
+    assert stopped - when["t"] < 0.5, stopped - when["t"]
+    assert not any(_alive(p) for p in pids)
