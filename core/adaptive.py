@@ -39,13 +39,13 @@ from .criteria import (SHADOW_SAMPLES, EmitterSamples, contact_edges, contact_po
 from .duplicates import copy_duplicate_faces
 from .elements import bake_elements
 from .gather import borrow_at_vertex, NORMAL_DECIMALS, corner_groups, shade
-from .farfield import FarField, Seen, seen_subset
+from .farfield import FarField, Seen, compact_with_sums, seen_subset
 from .geometry import spatial_order
 from .hemicube import point_rows
 from .hierarchy import ElementTree, output_mesh
 from .parallel import Deferred
 from .progress import SubMonitor
-from .rows import RowStore, compact_rows
+from .rows import RowStore
 from .scene import make_scene
 
 #: Default coarse patch size (m) of the mesh output, clamped to the scene's bounding diagonal
@@ -322,20 +322,23 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
                 kw = dict(resolution=settings.resolution, rotate=settings.rotate_hemicube,
                           rng=rng, later=True)
                 if not seen.areas.size:  # nothing lit to see (exact emitters light a black room)
-                    ahead = Deferred(lambda n=g.size: np.zeros((n, 0), dtype=np.float32))
+                    ahead = Deferred(lambda n=g.size: (np.zeros(0, dtype=np.int64),
+                                                       np.zeros((n, 0), dtype=np.float32),
+                                                       np.zeros(n)))
                 elif far_field is None:
-                    ahead = point_rows(seen, groups.points[g], groups.normals[g], **kw)
+                    ahead = point_rows(seen, groups.points[g], groups.normals[g],
+                                       **kw).then(compact_with_sums)
                 else:
-                    ahead = far_field.rows(groups.points[g], groups.normals[g], **kw)
+                    ahead = far_field.rows(groups.points[g], groups.normals[g], compact=True,
+                                           **kw)
             if started is not None:
-                s0, rows = started[0], started[1].result()
-                cols, vals = compact_rows(rows)
+                s0, (cols, vals, sums) = started[0], started[1].result()
                 at = pos_in_new[s0:s0 + GATHER_BATCH]
                 inc[at] = vals.astype(np.float64) @ seen_L[cols]
-                covered[at] = rows.sum(axis=1)
+                covered[at] = sums
                 batches.append((at, cols, vals))
                 if gather_monitor is not None:
-                    done = (s0 + rows.shape[0]) / go.size  # level k: [1 - 2^-k, 1 - 2^-(k+1)]
+                    done = (s0 + vals.shape[0]) / go.size  # level k: [1 - 2^-k, 1 - 2^-(k+1)]
                     gather_monitor.update(1.0 - 0.5 ** level * (1.0 - 0.5 * done),
                                           f"mesh: level {level}, {tree.points.shape[0]} points")
             started = None if ahead is None else (s, ahead)

@@ -9,6 +9,7 @@ import numpy as np
 
 from .geometry import patch_extents
 from .hemicube import point_rows
+from .rows import compact_rows
 
 #: A gather batch draws a solved patch whole, instead of its receiver elements, when it lies
 #: farther than this many times its size from every point of the batch: there it covers a few
@@ -67,16 +68,20 @@ class FarField:
         self.drawn_items = 0
         self._last = None                      # (far mask, Drawn) of the last batch
 
-    def rows(self, points, normals, **kw):
+    def rows(self, points, normals, compact=False, **kw):
         """(S, 2K) rows of ``points`` against the seen elements' nodes (with ``later=True``, a
-        :class:`core.parallel.Deferred` of them)."""
+        :class:`core.parallel.Deferred` of them); with ``compact=True``, the rows as
+        :func:`compact_with_sums` gives them, made without the dense (S, 2K) rows."""
         lo, hi = points.min(axis=0), points.max(axis=0)
         centres = self.patches.centres
         gap = np.linalg.norm(centres - np.clip(centres, lo, hi), axis=1) - self.radius
         far = self.has & (gap > FAR_FIELD * self.size)
         if not far.any():
             self.drawn_items += self.parent.size
-            return point_rows(self.seen, points, normals, **kw)
+            rows = point_rows(self.seen, points, normals, **kw)
+            if not compact:
+                return rows
+            return rows.then(compact_with_sums) if kw.get("later") else compact_with_sums(rows)
         whole = np.flatnonzero(far)
         near = np.flatnonzero(~far[self.parent])
         if self._last is None or not np.array_equal(self._last[0], far):
@@ -86,10 +91,11 @@ class FarField:
         drawn = self._last[1]
         self.drawn_items += whole.size + near.size
         mixed = point_rows(drawn, points, normals, **kw)            # (S, 2D)
-        weight = self.weight
+        unmix = _unmix_compact if compact else _unmix
+        args = (far, whole, near, self.parent, self.weight)
         if kw.get("later"):
-            return mixed.then(lambda m: _unmix(m, far, whole, near, self.parent, weight))
-        return _unmix(mixed, far, whole, near, self.parent, weight)
+            return mixed.then(lambda m: unmix(m, *args))
+        return unmix(mixed, *args)
 
 
 def _unmix(mixed, far, whole, near, parent, weight):
@@ -106,6 +112,43 @@ def _unmix(mixed, far, whole, near, parent, weight):
     out[:, child] = mixed[:, col] * weight[child]
     out[:, K + child] = mixed[:, D + col] * weight[child]
     return out
+
+
+def compact_with_sums(rows):
+    """(cols, vals, row sums) of dense ``rows``: :func:`core.rows.compact_rows` and what each
+    row sees in all (summed over the hit columns)."""
+    cols, vals = compact_rows(rows)
+    return cols, vals, rows[:, cols].sum(axis=1)
+
+
+def _unmix_compact(mixed, far, whole, near, parent, weight):
+    """:func:`compact_with_sums` of :func:`_unmix`, from the mixed rows' hit columns only (the
+    dense rows span every seen element: tens of megabytes per batch on a large model)."""
+    D, K, W = whole.size + near.size, parent.size, whole.size
+    hit = np.flatnonzero(np.any(mixed > 0, axis=0))             # mixed columns, both sides
+    back = hit >= D
+    j = hit - D * back                                           # index in [0, D)
+    is_near = j >= W
+    cols = [near[j[is_near] - W] + K * back[is_near]]
+    source = [hit[is_near]]
+    scale = [np.ones(int(is_near.sum()))]
+    slot = np.full(far.size, -1, dtype=np.int64)
+    slot[whole] = np.arange(W)
+    child = np.flatnonzero(far[parent])
+    col = slot[parent[child]]                                    # far column of each child
+    for side in (False, True):
+        lit = np.zeros(W, dtype=bool)
+        lit[j[~is_near & (back == side)]] = True
+        kids = child[lit[col]]
+        cols.append(kids + K * side)
+        source.append(col[lit[col]] + D * side)
+        scale.append(weight[kids])
+    cols, source, scale = (np.concatenate(a) for a in (cols, source, scale))
+    order = np.argsort(cols, kind="stable")
+    values = mixed[:, source[order]] * scale[order]
+    keep = np.any(values > 0, axis=0)
+    values = values[:, keep]
+    return cols[order][keep], values.astype(np.float32), values.sum(axis=1)
 
 
 def seen_subset(patches, radiance, power):

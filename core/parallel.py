@@ -242,16 +242,33 @@ def _receive(stream):
 
 
 class _Worker:
-    """One worker process, and a thread that reads its answers into a queue (portable: waiting
-    on a queue with a timeout works on every platform, select on pipes does not)."""
+    """One worker process, a thread that reads its answers into a queue (portable: waiting on a
+    queue with a timeout works on every platform, select on pipes does not), and a thread that
+    writes the messages for it, so that the bake never waits on a full pipe while the worker
+    still computes the previous call."""
 
     def __init__(self, command, env):
         self.proc = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                      env=env)
         self.answers = queue.Queue()
+        self.outbox = queue.Queue()
         self.kept = collections.deque()         # geometry tokens the worker holds, oldest first
         self.reader = threading.Thread(target=self._read, daemon=True)
         self.reader.start()
+        self.writer = threading.Thread(target=self._write, daemon=True)
+        self.writer.start()
+
+    def _write(self):
+        while True:
+            data = self.outbox.get()
+            if data is None:
+                return
+            try:
+                self.proc.stdin.write(_HEADER.pack(len(data)))
+                self.proc.stdin.write(data)
+                self.proc.stdin.flush()
+            except (OSError, ValueError):       # the worker is gone: the reader reports it
+                return
 
     def _read(self):
         try:
@@ -264,16 +281,16 @@ class _Worker:
             self.answers.put(None)
 
     def send(self, message):
-        _send(self.proc.stdin, message)
+        self.outbox.put(pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL))
 
     def kill(self):
-        for stream in (self.proc.stdin,):
-            try:
-                stream.close()
-            except OSError:
-                pass
         if self.proc.poll() is None:
             self.proc.kill()
+        self.outbox.put(None)
+        try:
+            self.proc.stdin.close()
+        except (OSError, ValueError):
+            pass
         try:
             self.proc.wait(timeout=5)
         except subprocess.TimeoutExpired:

@@ -334,3 +334,11 @@ def test_far_patches_drawn_whole_gather_what_their_elements_would():
     np.testing.assert_allclose(got, want, rtol=0.01)
     # Row sums (what each point sees in all) agree closely: the same surfaces are drawn.
     np.testing.assert_allclose(mixed.sum(axis=1), full.sum(axis=1), rtol=2e-3)
+    # The compact form the mesh stage uses is the dense rows' compact form, made without them.
+    from core.farfield import compact_with_sums
+    cols, vals, sums = far.rows(points, normals, rng=np.random.default_rng(1), compact=True,
+                                **kw)
+    want_cols, want_vals, want_sums = compact_with_sums(mixed)
+    assert cols.size > 100 and np.array_equal(cols, want_cols)
+    assert np.array_equal(vals, want_vals)
+    np.testing.assert_allclose(sums, want_sums, rtol=1e-12)
