@@ -28,7 +28,7 @@ from .emitters import Emitters, exact_materials
 from .lights import DirectLight
 from .duplicates import (duplicate_warning, fill_duplicate_colours, merge_duplicates,
                          near_duplicate_warning)
-from . import parallel
+from . import memory, parallel
 from .orient import orient
 from .patches import make_patches, subdivide_patches
 from .pipeline import (check_result, colours, form_factors, gathered_incident, make_gather,
@@ -123,9 +123,12 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     settings = BakeSettings() if settings is None else settings
     if not isinstance(settings, BakeSettings):
         raise TypeError(f"settings must be a BakeSettings; got {type(settings).__name__}")
-    with parallel.using(settings.workers, cancel) as shared:
+    with parallel.using(settings.workers, cancel) as shared, memory.stages() as peaks:
         result = _bake(scene, settings, progress, cancel)
+    result.report["peak_mb"] = peaks
     result.report["workers"] = dict(processes=shared["processes"], shared_calls=shared["calls"])
+    if shared["peak_mb"] is not None:
+        result.report["workers"]["peak_mb"] = shared["peak_mb"]
     if shared["problem"] is not None:
         result.report["workers"]["problem"] = shared["problem"]
         result.report.setdefault("warnings", []).append(
@@ -149,6 +152,7 @@ def _bake(scene, settings, progress, cancel):
     scene = merge_duplicates(scene)      # stability (issue 11): coincident faces solved as one
     patches, found, contacts = _solve_patches(scene, settings, level_monitor.check)
     t_patches = time.perf_counter() - t0
+    memory.mark("patches")
     level_monitor.update(1.0, f"{len(patches.areas)} patches")
 
     result = _run(scene, settings, patches, level_monitor, t_start=t_start,
@@ -359,6 +363,7 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     nodes = node_arrays(scene, patches, settings.two_sided, direct)
     if direct is not None:
         timings["lights"] = time.perf_counter() - t0
+        memory.mark("lights")
 
     monitor.stage(*_STAGES["form_factors"])
     monitor.update(0.0, "form factors")
@@ -375,6 +380,7 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
                           skip_late=skip_late, all_nodes=world)
     monitor.update(1.0, "form factors done")
     timings["form_factors"] = time.perf_counter() - t0
+    memory.mark("form_factors")
     nodes = with_world(nodes, ff.store.row_sums, scene.world)
 
     monitor.stage(*_STAGES["solve"])
@@ -383,6 +389,7 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     sol = solve(ff, nodes, settings, monitor)
     monitor.update(1.0, "solved")
     timings["solve"] = time.perf_counter() - t0
+    memory.mark("solve")
 
     monitor.stage(*_STAGES["colours"])
     monitor.update(0.0, "colours")
@@ -428,6 +435,7 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
         incident = fill_duplicate_colours(scene, gathered_incident(side.scene, sol.node_radiance,
                                                                    gather))
     timings["colours"] = time.perf_counter() - t0
+    memory.mark("colours")
     monitor.update(1.0, "done")
     timings["total"] = time.perf_counter() - t_start
 

@@ -40,6 +40,7 @@ import weakref
 import numpy as np
 
 from .errors import BakeCancelled
+from .memory import peak_mb
 
 #: Seconds between two looks at the cancel check while the workers compute.
 WAIT_STEP = 0.05
@@ -86,7 +87,7 @@ def using(workers, cancel=None):
     One bake at a time uses the process's pool: a bake in another thread meanwhile runs in its
     own process only."""
     n = resolve(workers)
-    stats = dict(processes=1, calls=0, problem=None)
+    stats = dict(processes=1, calls=0, problem=None, peak_mb=None)
     previous = getattr(_local, "context", None)
     owner = n > 1 and previous is None and _pool_lock.acquire(blocking=False)
     if n > 1 and previous is None and not owner:
@@ -165,7 +166,10 @@ def submit(sc, eyes, frames, out):
 
     def collect():
         try:
-            return pool.collect(job, out, context.cancel)
+            pool.collect(job, out, context.cancel)
+            if pool.peak_mb is not None:
+                stats["peak_mb"] = round(max(pool.peak_mb, stats["peak_mb"] or 0.0), 1)
+            return out
         except WorkerError as exc:     # a worker died or failed: this process does the rest
             stats["problem"] = str(exc)
             from .hemicube_chunk import rows_in_chunks
@@ -310,6 +314,7 @@ class Pool:
         self.workers = []
         self.pending = collections.deque()      # submitted jobs not yet collected, in order
         self.ready = []                         # each worker's first message (pid, module)
+        self.peak_mb = None                     # the workers' largest peak resident set, MiB
         try:
             for _ in range(self.size):
                 self.workers.append(_Worker(command, env))
@@ -379,8 +384,7 @@ class Pool:
                 self.close()
         return out
 
-    @staticmethod
-    def _answer(worker, cancel):
+    def _answer(self, worker, cancel):
         while True:
             if cancel is not None and cancel():
                 raise BakeCancelled("bake cancelled")
@@ -393,6 +397,8 @@ class Pool:
                                   f"(code {worker.proc.poll()})")
             if answer[0] == "error":
                 raise WorkerError(f"worker process {worker.proc.pid} failed:\n{answer[1]}")
+            if answer[2] is not None:
+                self.peak_mb = max(self.peak_mb or 0.0, answer[2])
             return answer[1]
 
 
@@ -423,7 +429,7 @@ def serve():
             sc.near = scalars["near"]
             out = np.zeros((eyes.shape[0], 2 * sc.n_patches))
             rows_in_chunks(sc, eyes, frames, out, None)
-            _send(sink, ("rows", out))
+            _send(sink, ("rows", out, peak_mb()))
         except Exception:                          # noqa: BLE001 - reported to the parent
             _send(sink, ("error", traceback.format_exc()))
 

@@ -166,6 +166,11 @@ def summary_lines(text):
     workers = report.get("workers")
     if isinstance(workers, dict) and isinstance(workers.get("processes"), int):
         lines.append((f"Workers: {workers['processes']} processes", "NONE"))
+    peaks = [v for v in (report.get("peak_mb") or {}).values() if isinstance(v, (int, float))]
+    if peaks:
+        extra = workers.get("peak_mb") if isinstance(workers, dict) else None
+        each = f", workers up to {extra:.0f} MB" if isinstance(extra, (int, float)) else ""
+        lines.append((f"Peak memory: {max(peaks):.0f} MB{each}", "NONE"))
     written = report.get("output_objects")
     if written:          # radiosity mesh output: what the user's faces became
         faces_in = sum(o.get("input_faces", 0) for o in written)

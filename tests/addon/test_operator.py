@@ -653,6 +653,18 @@ def test_summary_lines_put_the_total_first_with_human_labels():
     assert PACKAGE.radiosity_addon.panels.summary_lines("not json") == []
 
 
+def test_summary_lines_give_the_workers_and_the_peak_memory():
+    report = {"patches": 12, "timings": {"total": 2.0},
+              "workers": {"processes": 2, "shared_calls": 40, "peak_mb": 180.4},
+              "peak_mb": {"patches": 120.0, "form_factors": 610.6, "colours": 300.0}}
+    lines = [t for t, _ in PACKAGE.radiosity_addon.panels.summary_lines(json.dumps(report))]
+    assert "Workers: 2 processes" in lines
+    assert "Peak memory: 611 MB, workers up to 180 MB" in lines
+    del report["workers"]
+    lines = [t for t, _ in PACKAGE.radiosity_addon.panels.summary_lines(json.dumps(report))]
+    assert "Peak memory: 611 MB" in lines and not any(t.startswith("Workers") for t in lines)
+
+
 class _Event:
     """What the modal handler reads of a bpy.types.Event: type and value, nothing more (no
     'timer': Event has none in 4.2 to 5.0)."""
