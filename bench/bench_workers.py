@@ -8,8 +8,8 @@ memory is its own): the parent's and the workers' peak resident sets are reporte
 bakes of one size run back to back, and their outputs are compared bit for bit.
 
 Run: ``.venv/bin/python bench/bench_workers.py [--sizes 1:3000 2:10000 ...]``. Prints one line per
-bake (rooms, workers, output vertices, seconds per stage, peak MB) and the 1-worker / 2-worker time
-ratio per size.
+bake (rooms, workers, output vertices, seconds per stage, the bake process's and the workers' CPU
+seconds, peak MB) and the 1-worker / 2-worker time ratio per size.
 """
 
 import argparse
@@ -52,16 +52,17 @@ def interior(rooms):
 def one_bake(rooms, budget, workers):
     """Bake one size in this process; a dict of figures."""
     scene = interior(rooms)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     result = bake(scene, BakeSettings(workers=workers, vertex_budget=budget, min_element=0.02))
-    seconds = time.perf_counter() - t0
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     parallel.close()                       # reap the workers: their peak counts as children's
     out = result.output
     digest = hashlib.sha256()
     for a in (out.vertices, out.corner_colours, result.corner_colours):
         digest.update(np.ascontiguousarray(a).tobytes())
     return dict(rooms=rooms, budget=budget, workers=workers, vertices=int(out.vertices.shape[0]),
-                seconds=seconds, stages=result.report["timings"],
+                seconds=seconds, stages=result.report["timings"], cpu=cpu,
+                workers_cpu=result.report["workers"].get("cpu_seconds", 0.0),
                 processes=result.report["workers"]["processes"],
                 peak_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
                 workers_peak_mb=resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024,
@@ -79,7 +80,7 @@ def main():
         print(json.dumps(one_bake(*args.one)))
         return
     print(f"{'rooms':>5} {'workers':>7} {'vertices':>8} {'total s':>8} {'colours s':>9} "
-          f"{'form f. s':>9} {'peak MB':>8} {'workers MB':>10}")
+          f"{'form f. s':>9} {'cpu s':>7} {'wrk cpu s':>9} {'peak MB':>8} {'workers MB':>10}")
     for size in args.sizes:
         rooms, budget = (int(x) for x in size.split(":"))
         runs = {}
@@ -90,7 +91,8 @@ def main():
             r = runs[workers] = json.loads(line)
             print(f"{rooms:>5} {r['processes']:>7} {r['vertices']:>8} {r['seconds']:>8.1f} "
                   f"{r['stages'].get('colours', 0):>9.1f} "
-                  f"{r['stages'].get('form_factors', 0):>9.1f} {r['peak_mb']:>8.0f} "
+                  f"{r['stages'].get('form_factors', 0):>9.1f} {r['cpu']:>7.1f} "
+                  f"{r['workers_cpu']:>9.1f} {r['peak_mb']:>8.0f} "
                   f"{r['workers_peak_mb']:>10.0f}", flush=True)
         same = runs[1]["digest"] == runs[2]["digest"]
         print(f"      rooms {rooms}: 1 worker / 2 workers = "

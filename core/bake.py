@@ -127,6 +127,8 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
         result = _bake(scene, settings, progress, cancel)
     result.report["peak_mb"] = peaks
     result.report["workers"] = dict(processes=shared["processes"], shared_calls=shared["calls"])
+    if shared["calls"]:
+        result.report["workers"]["cpu_seconds"] = round(shared["cpu_seconds"], 3)
     if shared["peak_mb"] is not None:
         result.report["workers"]["peak_mb"] = shared["peak_mb"]
     if shared["problem"] is not None:

@@ -34,6 +34,7 @@ import struct
 import subprocess
 import sys
 import threading
+import time
 import traceback
 import weakref
 
@@ -81,13 +82,14 @@ def resolve(workers):
 def using(workers, cancel=None):
     """Within the block, this thread's hemicube calls are shared among ``workers`` processes
     (None: one per core; 1: none). ``cancel`` is the bake's cancel check. Yields a dict that
-    the calls fill: ``processes`` (most workers that computed one call's rows), ``calls`` and
-    ``problem`` (why the workers could not be used, or None).
+    the calls fill: ``processes`` (most workers that computed one call's rows), ``calls``,
+    ``cpu_seconds`` (the workers' CPU time on rows), ``peak_mb`` (the largest worker's peak
+    resident set) and ``problem`` (why the workers could not be used, or None).
 
     One bake at a time uses the process's pool: a bake in another thread meanwhile runs in its
     own process only."""
     n = resolve(workers)
-    stats = dict(processes=1, calls=0, problem=None, peak_mb=None)
+    stats = dict(processes=1, calls=0, problem=None, peak_mb=None, cpu_seconds=0.0)
     previous = getattr(_local, "context", None)
     owner = n > 1 and previous is None and _pool_lock.acquire(blocking=False)
     if n > 1 and previous is None and not owner:
@@ -166,7 +168,9 @@ def submit(sc, eyes, frames, out):
 
     def collect():
         try:
+            cpu = pool.cpu_seconds
             pool.collect(job, out, context.cancel)
+            stats["cpu_seconds"] += pool.cpu_seconds - cpu
             if pool.peak_mb is not None:
                 stats["peak_mb"] = round(max(pool.peak_mb, stats["peak_mb"] or 0.0), 1)
             return out
@@ -315,6 +319,7 @@ class Pool:
         self.pending = collections.deque()      # submitted jobs not yet collected, in order
         self.ready = []                         # each worker's first message (pid, module)
         self.peak_mb = None                     # the workers' largest peak resident set, MiB
+        self.cpu_seconds = 0.0                  # CPU time the workers spent on rows
         try:
             for _ in range(self.size):
                 self.workers.append(_Worker(command, env))
@@ -399,6 +404,7 @@ class Pool:
                 raise WorkerError(f"worker process {worker.proc.pid} failed:\n{answer[1]}")
             if answer[2] is not None:
                 self.peak_mb = max(self.peak_mb or 0.0, answer[2])
+            self.cpu_seconds += answer[3]
             return answer[1]
 
 
@@ -427,9 +433,10 @@ def serve():
             sc = Scene(kept[token], scalars["n_patches"], scalars["resolution"],
                        scalars["cull_back"])
             sc.near = scalars["near"]
+            tic = time.process_time()
             out = np.zeros((eyes.shape[0], 2 * sc.n_patches))
             rows_in_chunks(sc, eyes, frames, out, None)
-            _send(sink, ("rows", out, peak_mb()))
+            _send(sink, ("rows", out, peak_mb(), time.process_time() - tic))
         except Exception:                          # noqa: BLE001 - reported to the parent
             _send(sink, ("error", traceback.format_exc()))
 

@@ -87,6 +87,7 @@ def test_a_bake_on_two_workers_equals_the_bake_in_one_process():
     assert one.report["workers"] == dict(processes=1, shared_calls=0)
     assert two.report["workers"]["processes"] == 2
     assert two.report["workers"]["shared_calls"] > 10
+    assert two.report["workers"]["cpu_seconds"] > 0
     assert all(np.array_equal(a, b) for a, b in zip(_outputs(one), _outputs(two)))
     assert not any("workers" in w for w in two.report["warnings"])
 
