@@ -193,11 +193,16 @@ def share(sc, eyes, frames, out):
 
 
 def close():
-    """Stop the process's workers (they start again when next needed)."""
-    with _pool_lock:
-        if _pool[0] is not None:
-            _pool[0].close()
-            _pool[0] = None
+    """Stop the process's workers (they start again when next needed). Never waits long for
+    a bake that holds them (at exit, a bake thread may still be running): it stops them then."""
+    locked = _pool_lock.acquire(timeout=2.0)
+    try:
+        pool, _pool[0] = _pool[0], None
+        if pool is not None:
+            pool.close()
+    finally:
+        if locked:
+            _pool_lock.release()
 
 
 atexit.register(close)
