@@ -261,8 +261,10 @@ class _Worker:
     still computes the previous call."""
 
     def __init__(self, command, env):
+        # No console window per worker on Windows (Blender runs without one).
+        flags = getattr(subprocess, "CREATE_NO_WINDOW", 0) if sys.platform == "win32" else 0
         self.proc = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     env=env)
+                                     env=env, creationflags=flags)
         self.answers = queue.Queue()
         self.outbox = queue.Queue()
         self.kept = collections.deque()         # geometry tokens the worker holds, oldest first
@@ -419,7 +421,9 @@ def serve():
 
     source = sys.stdin.buffer
     sink = os.fdopen(os.dup(sys.stdout.fileno()), "wb")
-    os.dup2(sys.stderr.fileno(), sys.stdout.fileno())        # stray prints go to stderr
+    # Stray prints go to stderr (or nowhere, when the parent had no console to hand on).
+    err = sys.stderr.fileno() if sys.stderr is not None else os.open(os.devnull, os.O_WRONLY)
+    os.dup2(err, sys.stdout.fileno())
     kept = collections.OrderedDict()
     _send(sink, ("ready", dict(pid=os.getpid(), module=__name__, bpy="bpy" in sys.modules)))
     while True:
