@@ -273,19 +273,32 @@ class Emitters:
         return np.concatenate(out_l), np.concatenate(out_p), np.concatenate(out_m)
 
     def _near_pairs(self, q, centres, radius, e_centre, e_radius, receives):
-        """(emitter patch, receiver patch, gap) of face slot ``q``'s patches and the receivers
-        within ``NEAR_PATCH`` of their diameters (bounding spheres), in blocks of emitter
-        patches so that a large emitter's (K, P) distances never sit in memory at once."""
-        out = []
+        """(emitter patch, receiver patch, gap) of face slot ``q``: every receiver within
+        ``NEAR_PATCH`` of its diameter of one of the face's patches (bounding spheres), paired
+        with *every* patch of the face, so that its mean integrates the whole emitter (a receiver
+        near one patch of a lamp split in four also sees the other three). Blocks of emitter
+        patches keep a large emitter's (K, P) distances out of memory at once."""
         block = max(1, NEAR_CHUNK // max(centres.shape[0], 1))
-        for a in range(self._start[q], self._stop[q], block):
-            ks = np.arange(a, min(a + block, self._stop[q]))
-            d = centres[None] - e_centre[ks, None]
-            gaps = np.sqrt(np.einsum("kpj,kpj->kp", d, d)) - radius[None] - e_radius[ks, None]
-            k, p = np.nonzero((gaps < NEAR_PATCH * 2.0 * radius[None]) & receives[None])
-            out.append((ks[k], p, np.maximum(gaps[k, p], 0.0)))
-        if not out:
+        spans = [np.arange(a, min(a + block, self._stop[q]))
+                 for a in range(self._start[q], self._stop[q], block)]
+
+        def gaps(ks, p):
+            d = centres[p][None] - e_centre[ks, None]
+            return np.sqrt(np.einsum("kpj,kpj->kp", d, d)) - radius[p][None] \
+                - e_radius[ks, None]
+
+        everyone = np.arange(centres.shape[0])
+        near = np.zeros(centres.shape[0], dtype=bool)
+        for ks in spans:
+            near |= np.any(gaps(ks, everyone) < NEAR_PATCH * 2.0 * radius[None], axis=0)
+        p = np.flatnonzero(near & receives)
+        if p.size == 0:
             return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0)
+        out = []
+        for ks in spans:
+            g = gaps(ks, p)
+            out.append((np.repeat(ks, p.size), np.tile(p, ks.size),
+                        np.maximum(g, 0.0).ravel()))
         return tuple(np.concatenate(a) for a in zip(*out))
 
     def _samples(self, q, shift, index):
