@@ -11,10 +11,12 @@ from .outmesh import OutputMesh
 from .photometry import Photometry, read_photometry
 from .scene import Scene, make_scene, scene_from_polygons
 from .settings import BakeSettings
+from .sky import CIEOvercast, Environment, Sky, Uniform, zenith_radiance
 
 __all__ = [
     "BakeCancelled", "RadiosityError", "SceneError", "SettingsError",
     "Lights", "make_lights", "Photometry", "read_photometry",
     "OutputMesh", "Scene", "make_scene", "scene_from_polygons",
     "BakeResult", "BakeSettings", "bake", "form_factor_matrix", "relight",
+    "Sky", "CIEOvercast", "Environment", "Uniform", "zenith_radiance",
 ]

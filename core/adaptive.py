@@ -308,6 +308,8 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         inc = np.zeros((new.size, 3))
         dl = np.zeros((new.size, 3))
         covered = np.ones(new.size)
+        sky = None if direct is None else direct.sky
+        sky_in = None if sky is None else np.zeros((new.size, 3))
         vis = np.zeros(new.size, dtype=np.int64)
         batches = []
         pos_in_new = np.searchsorted(new, go)
@@ -317,10 +319,14 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         started = None
         for s in range(0, go.size + GATHER_BATCH, GATHER_BATCH):
             ahead = None
+            light = None
             if s < go.size:
                 g = go[s:s + GATHER_BATCH]
                 kw = dict(resolution=settings.resolution, rotate=settings.rotate_hemicube,
                           rng=rng, later=True)
+                if sky is not None:         # filled when the batch's rows are
+                    light = np.zeros((g.size, 3))
+                    kw.update(sky=sky, sky_out=light)
                 if not seen.areas.size:  # nothing lit to see (exact emitters light a black room)
                     ahead = Deferred(lambda n=g.size: (np.zeros(0, dtype=np.int64),
                                                        np.zeros((n, 0), dtype=np.float32),
@@ -336,17 +342,20 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
                 at = pos_in_new[s0:s0 + GATHER_BATCH]
                 inc[at] = vals.astype(np.float64) @ seen_L[cols]
                 covered[at] = sums
+                if sky is not None:
+                    sky_in[at] = started[2]
                 batches.append((at, cols, vals))
                 if gather_monitor is not None:
                     done = (s0 + vals.shape[0]) / go.size  # level k: [1 - 2^-k, 1 - 2^-(k+1)]
                     gather_monitor.update(1.0 - 0.5 ** level * (1.0 - 0.5 * done),
                                           f"mesh: level {level}, {tree.points.shape[0]} points")
-            started = None if ahead is None else (s, ahead)
+            started = None if ahead is None else (s, ahead, light)
         if go.size:
             vis[pos_in_new] = emitters.visibility(groups.points[go], groups.normals[go])
             if direct is not None:
-                dl[pos_in_new], bits = direct.extra(groups.points[go], groups.normals[go],
-                                                    covered[pos_in_new], bits=True)
+                dl[pos_in_new], bits = direct.extra(
+                    groups.points[go], groups.normals[go], covered[pos_in_new], bits=True,
+                    sky=None if sky is None else sky_in[pos_in_new])
                 inc[pos_in_new] += dl[pos_in_new]
                 vis[pos_in_new] |= bits << SHADOW_SAMPLES
         added = cache.add(keys[new], inc, vis, dl)

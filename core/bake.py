@@ -38,6 +38,7 @@ from .reciprocity import make_reciprocal
 from .refine import refine_mask
 from .rows import form_factor_matrix
 from .settings import BakeSettings
+from .sky import outdoor_lux, sky_for
 
 __all__ = ["BakeResult", "BakeSettings", "bake", "form_factor_matrix", "make_reciprocal",
            "relight"]
@@ -152,6 +153,9 @@ def _bake(scene, settings, progress, cancel):
     level_monitor.update(0.0, "patches")
     t0 = time.perf_counter()
     scene = merge_duplicates(scene)      # stability (issue 11): coincident faces solved as one
+    sky = sky_for(settings, scene.world)
+    if sky is not scene.world:           # settings.sky names a sky: it replaces the world
+        scene = dataclasses.replace(scene, world=sky)
     patches, found, contacts = _solve_patches(scene, settings, level_monitor.check)
     t_patches = time.perf_counter() - t0
     memory.mark("patches")
@@ -375,15 +379,17 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
         def skip_late(active, late):
             return unlit_late_nodes(scene, patches, active, late, settings.resolution)
     world = scene.world is not None
+    sky = None if direct is None else direct.sky        # a directional sky (core.sky)
     if kept is None:
-        ff = form_factors(patches, nodes, settings, monitor, skip_late=skip_late, all_nodes=world)
+        ff = form_factors(patches, nodes, settings, monitor, skip_late=skip_late, all_nodes=world,
+                          sky=sky)
     else:
         ff = form_factors(patches, nodes, settings, monitor, kept.store, kept.active,
-                          skip_late=skip_late, all_nodes=world)
+                          skip_late=skip_late, all_nodes=world, sky=sky)
     monitor.update(1.0, "form factors done")
     timings["form_factors"] = time.perf_counter() - t0
     memory.mark("form_factors")
-    nodes = with_world(nodes, ff.store.row_sums, scene.world)
+    nodes = with_world(nodes, ff.store.row_sums, scene.world, ff.store.sky)
 
     monitor.stage(*_STAGES["solve"])
     monitor.update(0.0, "solving")
@@ -470,6 +476,8 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     else:
         report["face_variation"] = face_variation(scene, patches, patch_radiance,
                                                   settings.contrast)
+    if sky is not None:              # what a daylight factor divides by (core.lux.summary)
+        report["sky"] = dict(kind=sky.kind, outdoor_lux=outdoor_lux(sky))
     if direct is not None and len(direct):
         n_lights = len(direct.lights)
         report["lights"] = dict(count=n_lights, names=list(direct.lights.names),

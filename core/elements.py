@@ -165,11 +165,14 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
             for b in range(0, ids_side.size, batch):
                 ids = ids_side[b:b + batch]
                 normals = sign * elements.normals[ids]
+                sky = None if direct is None else direct.sky
+                light = None if sky is None else np.zeros((ids.size, 3))
                 rows = point_rows(patches, elements.centres[ids], normals,
-                                  resolution=resolution, rotate=rotate, rng=rng)
+                                  resolution=resolution, rotate=rotate, rng=rng, sky=sky,
+                                  sky_out=light)
                 cols, vals = compact_rows(rows)
                 dl = np.zeros((ids.size, 3)) if direct is None else \
-                    direct.extra(elements.centres[ids], normals, rows.sum(axis=1))
+                    direct.extra(elements.centres[ids], normals, rows.sum(axis=1), sky=light)
                 kept.append((ids, side, cols, vals, dl))
                 seen[side][ids] = shade_side(scene, elements.material[ids],
                                              np.full(ids.size, bool(side)),

@@ -166,15 +166,20 @@ def shade(scene, material, incident):
 
 
 def gather_rows(patches, groups, *, resolution=64, rotate=True, rng=None, monitor=None,
-                batch=64):
-    """Hemicube rows at every group's gather point, kept compact (:class:`core.rows.RowStore`)."""
+                batch=64, sky=None):
+    """Hemicube rows at every group's gather point, kept compact (:class:`core.rows.RowStore`);
+    with a directional ``sky`` (:class:`core.sky.Sky`), the store's ``sky`` holds its light at
+    every point."""
     G = groups.points.shape[0]
     store = RowStore(G, 2 * patches.areas.size)
+    if sky is not None:
+        store.sky = np.zeros((G, 3))
     for s in range(0, G, batch):
         idx = np.arange(s, min(s + batch, G))
+        light = None if sky is None else np.zeros((idx.size, 3))
         rows = point_rows(patches, groups.points[idx], groups.normals[idx],
-                          resolution=resolution, rotate=rotate, rng=rng)
-        store.add(idx, rows)
+                          resolution=resolution, rotate=rotate, rng=rng, sky=sky, sky_out=light)
+        store.add(idx, rows, light)
         if monitor is not None:
             monitor.update(min(s + batch, G) / max(G, 1), f"gathering at {G} vertices")
     return store

@@ -18,10 +18,12 @@ import weakref
 import numpy as np
 
 from .constants import tol
-from .hemicube_delta import FACE_NAMES, check_resolution, delta_form_factors  # noqa: F401
+from .hemicube_delta import (FACE_NAMES, check_resolution, delta_form_factors,  # noqa: F401
+                             flat_delta_form_factors)
 from .hemicube_chunk import Geometry, Scene, rows_in_chunks
 from .parallel import Deferred, submit
 from .patches import patch_triangles, triangle_mask
+from .sky import Sky, gathered
 from .validate import check_bool, check_sources, is_int
 
 
@@ -98,7 +100,8 @@ def eye_frames(centres, normals, corners, sources, n_patches, diag, angles):
 
 
 def polygon_rows(polys, poly_patch, centres, normals, corners, sources, *, resolution=64,
-                 rotate=False, rng=None, cull_back=False, timings=None, _geometry=None):
+                 rotate=False, rng=None, cull_back=False, timings=None, sky=None, sky_out=None,
+                 _geometry=None):
     """Hemicube rows over explicit polygons; :func:`hemicube_rows` without a Patches object.
 
     Parameters
@@ -115,6 +118,8 @@ def polygon_rows(polys, poly_patch, centres, normals, corners, sources, *, resol
         As :func:`hemicube_rows`.
     timings : dict or None
         If given, CPU seconds per stage and counts (pairs, items, rows, fragments) are added.
+    sky, sky_out
+        As :func:`hemicube_rows`.
     _geometry : internal
         A prepared ``Geometry`` of these polygons (cached by :func:`hemicube_rows`).
 
@@ -152,14 +157,43 @@ def polygon_rows(polys, poly_patch, centres, normals, corners, sources, *, resol
     angles = None
     if rotate:
         angles = make_rng(rng).uniform(0.0, 2.0 * np.pi, size=src.size)
+    sky_out = _check_sky(sky, sky_out, src.size)
     out = np.zeros((src.size, 2 * n_patches))
-    if src.size == 0 or polys.shape[0] == 0:
+    if src.size == 0:
+        return out
+    if polys.shape[0] == 0:                 # nothing to draw: the sky fills every pixel
+        if sky is not None:
+            _, frames = eye_frames(centres, normals, corners, src, n_patches, 1.0, angles)
+            sky_out[:] = open_sky(sky, frames, resolution)
         return out
     geometry = _geometry if _geometry is not None else Geometry(polys, poly_patch, normals)
     sc = Scene(geometry, n_patches, resolution, bool(cull_back))
+    sc.sky = sky
     eyes, frames = eye_frames(centres, normals, corners, src, n_patches, sc.diag, angles)
-    rows_in_chunks(sc, eyes, frames, out, timings)
+    rows_in_chunks(sc, eyes, frames, out, timings, sky_out)
     return out
+
+
+def open_sky(sky, frames, resolution):
+    """(S, 3) what eyes of ``frames`` (S, 3, 3) receive from ``sky`` with nothing in view."""
+    dff = flat_delta_form_factors(resolution)
+    return gathered(sky, frames, np.ones((frames.shape[0], dff.size), dtype=bool), dff)
+
+
+def _check_sky(sky, sky_out, n):
+    """``sky_out`` checked against ``sky`` (a core.sky.Sky or None) and ``n`` eyes."""
+    if sky is None:
+        if sky_out is not None:
+            raise ValueError("sky_out needs a sky; got sky=None")
+        return None
+    if not isinstance(sky, Sky):
+        raise TypeError(f"sky must be a core.sky.Sky or None; got {type(sky).__name__}")
+    if not (isinstance(sky_out, np.ndarray) and sky_out.shape == (n, 3)
+            and sky_out.dtype == np.float64):
+        got = getattr(sky_out, "shape", type(sky_out).__name__)
+        raise ValueError(f"sky_out must be a float64 array of shape ({n}, 3) with a sky; "
+                         f"got {got}")
+    return sky_out
 
 
 def draw_polygons(patches):
@@ -199,7 +233,8 @@ class _Corners:
         self.corners = corners
 
 
-def hemicube_rows(patches, sources, *, resolution=64, rotate=False, rng=None, cull_back=False):
+def hemicube_rows(patches, sources, *, resolution=64, rotate=False, rng=None, cull_back=False,
+                  sky=None, sky_out=None):
     """Form-factor rows of source nodes by the hemicube method.
 
     Parameters
@@ -222,6 +257,11 @@ def hemicube_rows(patches, sources, *, resolution=64, rotate=False, rng=None, cu
     cull_back : bool, optional
         Skip back-facing polygons entirely (only valid for closed one-sided scenes: light then
         passes through polygons seen from behind).
+    sky : core.sky.Sky, optional
+        A sky that varies with direction: what each source receives of it through the pixels no
+        polygon covers, ``sum dF x L(pixel direction)`` (irradiance / pi), is written into
+        ``sky_out`` (S, 3) float64 (required with it).
+    sky_out : (S, 3) float64 ndarray, optional
 
     Returns
     -------
@@ -238,10 +278,11 @@ def hemicube_rows(patches, sources, *, resolution=64, rotate=False, rng=None, cu
     polys, poly_patch, geometry = drawn_polygons(patches, normals)
     return polygon_rows(polys, poly_patch, centres, normals, corners, sources,
                         resolution=resolution, rotate=rotate, rng=rng, cull_back=cull_back,
-                        _geometry=geometry)
+                        sky=sky, sky_out=sky_out, _geometry=geometry)
 
 
-def point_rows(patches, points, normals, *, resolution=64, rotate=False, rng=None, later=False):
+def point_rows(patches, points, normals, *, resolution=64, rotate=False, rng=None, later=False,
+               sky=None, sky_out=None):
     """Hemicube rows from arbitrary points: what each point sees of every node.
 
     The receiver is a point, so the hemicube has no proximity error here (that error comes from
@@ -262,7 +303,9 @@ def point_rows(patches, points, normals, *, resolution=64, rotate=False, rng=Non
         Return a :class:`core.parallel.Deferred` of the rows: started now on the bake's worker
         processes, if it uses them, so that the caller can prepare its next call meanwhile
         (the random rotations are drawn now, so the rows do not depend on when they are asked
-        for).
+        for). ``sky_out`` is filled when the rows are.
+    sky, sky_out
+        As :func:`hemicube_rows`.
 
     Returns
     -------
@@ -282,6 +325,7 @@ def point_rows(patches, points, normals, *, resolution=64, rotate=False, rng=Non
         bad = int(np.argmax(np.abs(length - 1.0)))
         raise ValueError(f"normals must be unit vectors; normals[{bad}] has length {length[bad]:.6g}")
     check_bool("rotate", rotate)
+    sky_out = _check_sky(sky, sky_out, points.shape[0])
     _, n_normals, _ = patch_geometry(patches)
     n_patches = n_normals.shape[0]
     out = np.zeros((points.shape[0], 2 * n_patches))
@@ -289,6 +333,7 @@ def point_rows(patches, points, normals, *, resolution=64, rotate=False, rng=Non
         return Deferred(lambda: out) if later else out
     polys, poly_patch, geometry = drawn_polygons(patches, n_normals)
     sc = Scene(geometry, n_patches, resolution, False)
+    sc.sky = sky
     z = normals
     axis = np.eye(3)[np.argmin(np.abs(z), axis=1)]
     x = axis - np.sum(axis * z, axis=1, keepdims=True) * z
@@ -301,16 +346,16 @@ def point_rows(patches, points, normals, *, resolution=64, rotate=False, rng=Non
     frames = np.stack([x, y, z], axis=1)
     eyes = points + (tol.surface_offset * sc.diag) * z
     if later:
-        started = submit(sc, eyes, frames, out)
+        started = submit(sc, eyes, frames, out, sky_out)
         if started is not None:
             return started
-        return Deferred(lambda: _filled(sc, eyes, frames, out))
-    rows_in_chunks(sc, eyes, frames, out, None)
+        return Deferred(lambda: _filled(sc, eyes, frames, out, sky_out))
+    rows_in_chunks(sc, eyes, frames, out, None, sky_out)
     return out
 
 
-def _filled(sc, eyes, frames, out):
-    rows_in_chunks(sc, eyes, frames, out, None)
+def _filled(sc, eyes, frames, out, sky_out):
+    rows_in_chunks(sc, eyes, frames, out, None, sky_out)
     return out
 
 

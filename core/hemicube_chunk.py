@@ -4,7 +4,9 @@
 :func:`chunk_rows` puts the scene's distinct corners in every eye frame, drops the pairs that
 cannot be seen, sorts the others onto the faces they reach (clipping those that straddle a
 face's near plane) and hands them to the rasteriser (:mod:`core.hemicube_raster`); the z-buffer's
-items then sum the delta form factors (:mod:`core.hemicube_delta`) into the rows.
+items then sum the delta form factors (:mod:`core.hemicube_delta`) into the rows. With a
+directional sky (``Scene.sky``, :mod:`core.sky`), the pixels no item covers also give each eye
+its light from the sky.
 """
 
 import threading
@@ -16,6 +18,7 @@ from .constants import tol
 from .hemicube_delta import flat_delta_form_factors
 from .hemicube_raster import F32, FRAG_SLOTS, LITTLE_ENDIAN, ZBuffer, draw_items, pixel_coords
 from .parallel import share
+from .sky import gathered
 
 #: Work per internal chunk of sources: (source, polygon) pairs and hemicube pixels. Bounded so
 #: that the transient arrays of one chunk stay in the tens of megabytes while still amortising
@@ -59,7 +62,8 @@ def _distinct_rows(flat):
 
 
 class Scene:
-    """Per-call constants: the geometry, the resolution's pixel layout, culling."""
+    """Per-call constants: the geometry, the resolution's pixel layout, culling, and the sky
+    (``sky``: a :class:`core.sky.Sky` whose light the empty pixels gather, or None)."""
 
     def __init__(self, geometry, n_patches, resolution, cull_back):
         g = self.geometry = geometry
@@ -80,6 +84,7 @@ class Scene:
         self.face_offset = np.array([0] + [r * r + k * r * r // 2 for k in range(4)], np.int64)
         self.face_rows = np.array([r] + [r // 2] * 4, np.int64)
         self.face_rows_f = self.face_rows.astype(F32)
+        self.sky = None
 
     def tiled(self, s_n):
         """The delta form factors of ``s_n`` hemicubes in buffer order, (s_n 3 R^2,)."""
@@ -120,15 +125,16 @@ def _keep(name, tag, array):
     return array
 
 
-def chunk_rows(sc, eyes, frames, timings):
-    """Form-factor rows of one chunk of sources: (S, 2P)."""
+def chunk_rows(sc, eyes, frames, timings, sky_out=None):
+    """Form-factor rows of one chunk of sources: (S, 2P). With ``sc.sky``, the sky's light
+    through each eye's empty pixels goes into ``sky_out`` (S, 3)."""
     # Divisions by zero, overflow and NaN are expected and masked throughout (edge-on
     # polygons, lines parallel to the rows, vertices on the eye plane).
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
-        return _chunk_rows_raw(sc, eyes, frames, timings)
+        return _chunk_rows_raw(sc, eyes, frames, timings, sky_out)
 
 
-def _chunk_rows_raw(sc, eyes, frames, timings):
+def _chunk_rows_raw(sc, eyes, frames, timings, sky_out):
     """:func:`chunk_rows` with floating-point warnings already silenced."""
     tic = time.process_time()
     s_n = eyes.shape[0]
@@ -208,9 +214,14 @@ def _chunk_rows_raw(sc, eyes, frames, timings):
     cell = ps[item_pair] * n_cols + sc.poly_patch[pt[item_pair]] + sc.n_patches * back[item_pair]
     out = np.bincount(cell, weights=per_item, minlength=s_n * n_cols)
     t6 = time.process_time()
+    if sc.sky is not None:
+        sky_out[:] = gathered(sc.sky, frames, (low == 0).reshape(s_n, sc.npix),
+                              sc.tiled(1))
+    t7 = time.process_time()
     if timings is not None:
         for name, dt in (("cull", t1 - tic), ("items", t2 - t1), ("spans", t3 - t2),
-                         ("general", t4 - t3), ("zbuffer", t5 - t4), ("accumulate", t6 - t5)):
+                         ("general", t4 - t3), ("zbuffer", t5 - t4), ("accumulate", t6 - t5),
+                         ("sky", t7 - t6)):
             timings[name] = timings.get(name, 0.0) + dt
         for name, n in (("pairs", ps.size), ("general_pairs", q_gen.size),
                         ("items", item_pair.size), ("rows", n_rows),
@@ -341,17 +352,18 @@ def fill_cracks(keys, s_n, sc):
             face[s, i + 1, j + 1] = near
 
 
-def rows_in_chunks(sc, eyes, frames, out, timings):
+def rows_in_chunks(sc, eyes, frames, out, timings, sky_out=None):
     """Fill ``out`` (S, 2P) with the rows of every eye, in chunks sized for memory; shared among
     worker processes when a bake uses them (:mod:`core.parallel`; not when ``timings`` are
-    being taken)."""
-    if timings is None and share(sc, eyes, frames, out):
+    being taken). With ``sc.sky``, ``sky_out`` (S, 3) gets each eye's light from the sky."""
+    if timings is None and share(sc, eyes, frames, out, sky_out):
         return
     _prime_allocator()
     chunk = max(1, min(_CHUNK_PAIRS // sc.poly_v.shape[0], _CHUNK_PIXELS // sc.npix))
     for start in range(0, eyes.shape[0], chunk):
         stop = min(start + chunk, eyes.shape[0])
-        out[start:stop] = chunk_rows(sc, eyes[start:stop], frames[start:stop], timings)
+        out[start:stop] = chunk_rows(sc, eyes[start:stop], frames[start:stop], timings,
+                                     None if sky_out is None else sky_out[start:stop])
 
 
 #: A chunk allocates and frees some 20 MB of temporaries. glibc's malloc returns freed memory

@@ -46,6 +46,7 @@ from .exact import bilinear, gauss_square, ray_triangles
 from .geometry import unit_frames
 from .light_list import make_lights
 from .raycast import any_hit, build_bvh
+from .sky import Sky
 
 
 #: Shadow rays per light and point in the first round, on a ring at RIM x the light's radius (and
@@ -120,9 +121,10 @@ class DirectLight:
         What casts shadows (every patch; emitters included).
     samples : int
         Shadow rays per light and point where the light has a size (radius or angle).
-    world : (3,) float or None
+    world : (3,) float, core.sky.Sky or None
         Radiance of a uniform world: :meth:`extra` adds it for the part of a receiver's
-        hemisphere that no surface covers.
+        hemisphere that no surface covers; or a sky that varies with direction, whose light
+        the hemicube gathers (:attr:`sky`) and :meth:`extra` adds.
     min_size : float
         The smallest element the output can show (m). A light whose penumbrae are narrower
         (a point or spot light of radius below it, a sun whose angle's tangent times the scene's
@@ -141,7 +143,10 @@ class DirectLight:
         self._colours = np.concatenate([lt.intensity, lt.sun_irradiance,
                                         np.zeros((0, 3)) if n_e == 0 else
                                         self.emitters.colour]).reshape(-1, 3)
-        self.world = None if world is None else np.asarray(world, dtype=np.float64)
+        self.world = None if world is None or isinstance(world, Sky) \
+            else np.asarray(world, dtype=np.float64)
+        #: A directional sky (core.sky.Sky): the hemicubes gather its light, extra adds it.
+        self.sky = world if isinstance(world, Sky) else None
         self.samples = int(samples)
         tris = ray_triangles(patches)[0]
         self.bvh = build_bvh(tris)
@@ -171,14 +176,21 @@ class DirectLight:
         out /= np.pi
         return (out, vis_bits) if bits else out
 
-    def extra(self, points, normals, row_sums, *, bits=False):
+    def extra(self, points, normals, row_sums, *, bits=False, sky=None):
         """What a gather point receives besides its hemicube's surfaces (irradiance / pi):
         the lights' direct light, and the world in the part of the hemicube no surface covers,
-        ``world x (1 - row sum)``. ``bits`` as in :meth:`incident`."""
+        ``world x (1 - row sum)``; with a directional :attr:`sky`, ``sky`` (n, 3) instead: its
+        light as the points' hemicubes gathered it (``point_rows(..., sky=, sky_out=)``).
+        ``bits`` as in :meth:`incident`."""
         inc, vis = self.incident(points, normals, bits=True)
         if self.world is not None:
             sky = np.clip(1.0 - np.asarray(row_sums, dtype=np.float64), 0.0, 1.0)
             inc = inc + sky[:, None] * self.world[None, :]
+        elif self.sky is not None:
+            if sky is None:
+                raise ValueError("a directional sky needs its light from the hemicubes: "
+                                 "sky=(n, 3) of point_rows(..., sky_out=)")
+            inc = inc + np.asarray(sky, dtype=np.float64)
         return (inc, vis) if bits else inc
 
     def _colour(self, j):

@@ -145,16 +145,30 @@ def _in_triangle(xy, tri, eps):
     return (side(a, b) >= -eps) & (side(b, c) >= -eps) & (side(c, a) >= -eps)
 
 
-def summary(E, weights=None):
+def summary(E, weights=None, outdoor=None):
     """EN 12464-1's figures of a set of illuminances (lx): ``points``, ``Emin``, ``Eavg`` (the
-    ``weights``-weighted mean, cell areas), ``Emax``, ``U0`` = Emin / Eavg (0 in the dark)."""
+    ``weights``-weighted mean, cell areas), ``Emax``, ``U0`` = Emin / Eavg (0 in the dark).
+    With ``outdoor`` (lx, the unobstructed horizontal illuminance of the sky): the daylight
+    factors ``DFmin``, ``DFavg``, ``DFmax`` (%, :func:`daylight_factor`)."""
     E = np.asarray(E, dtype=np.float64).reshape(-1)
     if E.size == 0:
         raise ValueError("no illuminance values to sum up")
     w = np.ones_like(E) if weights is None else np.asarray(weights, dtype=np.float64)
     avg = float((E * w).sum() / w.sum())
-    return dict(points=int(E.size), Emin=float(E.min()), Eavg=avg, Emax=float(E.max()),
-                U0=float(E.min() / avg) if avg > 0 else 0.0)
+    out = dict(points=int(E.size), Emin=float(E.min()), Eavg=avg, Emax=float(E.max()),
+               U0=float(E.min() / avg) if avg > 0 else 0.0)
+    if outdoor is not None:
+        for name in ("min", "avg", "max"):
+            out["DF" + name] = float(daylight_factor(out["E" + name], outdoor))
+    return out
+
+
+def daylight_factor(E, outdoor):
+    """Daylight factor (%) of illuminances ``E`` (lx) under a sky giving ``outdoor`` lx on an
+    unobstructed horizontal plane: ``100 E / outdoor``."""
+    if not (np.isfinite(outdoor) and outdoor > 0):
+        raise ValueError(f"outdoor must be a finite illuminance > 0 (lx); got {outdoor!r}")
+    return 100.0 * np.asarray(E, dtype=np.float64) / float(outdoor)
 
 
 def incident_at(result, points, normals):
@@ -195,15 +209,18 @@ def incident_at(result, points, normals):
     rng = np.random.default_rng([settings.seed, 6])
     out = np.zeros((points.shape[0], 3))
     covered = np.zeros(points.shape[0])
+    sky = None if state.direct is None else state.direct.sky
+    light = None if sky is None else np.zeros((points.shape[0], 3))
     if drawn.areas.size:
         for s in range(0, points.shape[0], BATCH):
             rows = point_rows(drawn, points[s:s + BATCH], normals[s:s + BATCH],
                               resolution=settings.resolution, rotate=settings.rotate_hemicube,
-                              rng=rng)
+                              rng=rng, sky=sky,
+                              sky_out=None if sky is None else light[s:s + BATCH])
             out[s:s + BATCH] = rows @ L
             covered[s:s + BATCH] = rows.sum(axis=1)
     if state.direct is not None:
-        out += state.direct.extra(points, normals, covered)
+        out += state.direct.extra(points, normals, covered, sky=light)
     return out
 
 

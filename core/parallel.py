@@ -146,10 +146,11 @@ class Deferred:
         return Deferred(lambda: f(self.result()))
 
 
-def submit(sc, eyes, frames, out):
-    """Start the rows of ``eyes`` on the workers; a Deferred that fills ``out`` and returns it,
-    or None when this call is not shared (no pool in use, too few eyes, no workers): the
-    caller then computes the rows itself. Deferreds must be resolved in the order submitted."""
+def submit(sc, eyes, frames, out, sky_out=None):
+    """Start the rows of ``eyes`` on the workers; a Deferred that fills ``out`` (and, with a
+    sky ``sc.sky``, ``sky_out``) and returns ``out``, or None when this call is not shared (no
+    pool in use, too few eyes, no workers): the caller then computes the rows itself. Deferreds
+    must be resolved in the order submitted."""
     context = getattr(_local, "context", None)
     if context is None or eyes.shape[0] < 2 * MIN_EYES:
         return None
@@ -169,7 +170,7 @@ def submit(sc, eyes, frames, out):
     def collect():
         try:
             cpu = pool.cpu_seconds
-            pool.collect(job, out, context.cancel)
+            pool.collect(job, out, context.cancel, sky_out)
             stats["cpu_seconds"] += pool.cpu_seconds - cpu
             if pool.peak_mb is not None:
                 stats["peak_mb"] = round(max(pool.peak_mb, stats["peak_mb"] or 0.0), 1)
@@ -177,15 +178,15 @@ def submit(sc, eyes, frames, out):
         except WorkerError as exc:     # a worker died or failed: this process does the rest
             stats["problem"] = str(exc)
             from .hemicube_chunk import rows_in_chunks
-            rows_in_chunks(sc, eyes, frames, out, None)
+            rows_in_chunks(sc, eyes, frames, out, None, sky_out)
             return out
     return Deferred(collect)
 
 
-def share(sc, eyes, frames, out):
-    """Fill ``out`` with the rows of ``eyes`` from the workers now; False when the call is not
-    shared (see :func:`submit`)."""
-    job = submit(sc, eyes, frames, out)
+def share(sc, eyes, frames, out, sky_out=None):
+    """Fill ``out`` (and ``sky_out``) with the rows of ``eyes`` from the workers now; False
+    when the call is not shared (see :func:`submit`)."""
+    job = submit(sc, eyes, frames, out, sky_out)
     if job is None:
         return False
     job.result()
@@ -357,8 +358,9 @@ class Pool:
         (the parts' bounds) for :meth:`collect`."""
         token = _token(sc.geometry)
         bounds = np.linspace(0, eyes.shape[0], parts + 1).round().astype(np.int64)
+        # The sky as plain data: its class's module has another name in Blender than here.
         scalars = dict(n_patches=sc.n_patches, resolution=sc.r, cull_back=sc.cull_back,
-                       near=sc.near)
+                       near=sc.near, sky=None if sc.sky is None else sc.sky.message())
         job = (next(_next_token), bounds)
         self.pending.append(job[0])
         try:
@@ -376,9 +378,10 @@ class Pool:
             raise WorkerError(f"a worker process stopped: {exc}") from exc
         return job
 
-    def collect(self, job, out, cancel):
-        """The rows of a submitted ``job`` into ``out`` (returned); BakeCancelled when ``cancel``
-        says so (the workers are killed), WorkerError when one fails."""
+    def collect(self, job, out, cancel, sky_out=None):
+        """The rows of a submitted ``job`` into ``out`` (returned), its sky light into
+        ``sky_out`` (when it has a sky); BakeCancelled when ``cancel`` says so (the workers are
+        killed), WorkerError when one fails."""
         ident, bounds = job
         if not self.workers:
             raise WorkerError("the workers were stopped by an earlier failure")
@@ -387,7 +390,10 @@ class Pool:
         done = False
         try:
             for k in range(bounds.size - 1):
-                out[bounds[k]:bounds[k + 1]] = self._answer(self.workers[k], cancel)
+                rows, sky = self._answer(self.workers[k], cancel)
+                out[bounds[k]:bounds[k + 1]] = rows
+                if sky_out is not None:
+                    sky_out[bounds[k]:bounds[k + 1]] = sky
             done = True
         finally:
             if done:
@@ -412,12 +418,13 @@ class Pool:
             if answer[2] is not None:
                 self.peak_mb = max(self.peak_mb or 0.0, answer[2])
             self.cpu_seconds += answer[3]
-            return answer[1]
+            return answer[1], answer[4]
 
 
 def serve():
     """A worker's main loop: answer messages on stdin until it closes."""
     from .hemicube_chunk import Geometry, Scene, rows_in_chunks
+    from .sky import from_message
 
     source = sys.stdin.buffer
     sink = os.fdopen(os.dup(sys.stdout.fileno()), "wb")
@@ -442,10 +449,12 @@ def serve():
             sc = Scene(kept[token], scalars["n_patches"], scalars["resolution"],
                        scalars["cull_back"])
             sc.near = scalars["near"]
+            sc.sky = from_message(scalars["sky"])
             tic = time.process_time()
             out = np.zeros((eyes.shape[0], 2 * sc.n_patches))
-            rows_in_chunks(sc, eyes, frames, out, None)
-            _send(sink, ("rows", out, peak_mb(), time.process_time() - tic))
+            sky_out = None if sc.sky is None else np.zeros((eyes.shape[0], 3))
+            rows_in_chunks(sc, eyes, frames, out, None, sky_out)
+            _send(sink, ("rows", out, peak_mb(), time.process_time() - tic, sky_out))
         except Exception:                          # noqa: BLE001 - reported to the parent
             _send(sink, ("error", traceback.format_exc()))
 

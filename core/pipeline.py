@@ -32,7 +32,9 @@ from .gather import corner_groups, gather_rows, gathered_colours
 from .orient import BACKLIGHT_RATIO, MIN_LIT
 from .progress import SubMonitor
 from .reciprocity import asymmetry, make_reciprocal
-from .rows import RECIPROCAL_METHODS, Batcher, RowStore, discover, row_function, row_seconds
+from .rows import (RECIPROCAL_METHODS, Batcher, RowStore, discover, row_function, row_seconds,
+                   split_rows)
+from .sky import is_directional
 from .solvers import (matvec, solve_direct, solve_gauss_seidel, solve_jacobi,
                       solve_progressive)
 
@@ -70,7 +72,8 @@ class Nodes:
         Mean irradiance / pi of every node from the point, spot and sun lights
         (:meth:`core.lights.DirectLight.patch_incident`); None: no such lights.
     sky : (2P, 3) float64 or None
-        Irradiance / pi of every node from a uniform world (:func:`with_world`); None: none.
+        Irradiance / pi of every node from the world or a directional sky (:func:`with_world`);
+        None: none.
     exact : (2P, 3) float64 or None
         The part of ``le`` that :mod:`core.emitters` carries as direct light (the exact
         emitters' own emission): the solve transports ``le - exact`` and what the surfaces
@@ -125,12 +128,18 @@ class Nodes:
         return np.flatnonzero(np.any(self.source > 0, axis=1) & self.allowed)
 
 
-def with_world(nodes, row_sums, world):
+def with_world(nodes, row_sums, world, sky=None):
     """``nodes`` with a uniform world's light as ``sky``: ``world x (1 - row sum)`` for every
-    node with a row (the part of its hemicube that no surface covers)."""
+    node with a row (the part of its hemicube that no surface covers). A directional ``world``
+    (:class:`core.sky.Sky`) takes ``sky`` (2P, 3) instead: what each node's hemicube gathered
+    of it (:attr:`core.rows.RowStore.sky`)."""
     if world is None:
         return nodes
     s = np.asarray(row_sums, dtype=np.float64)
+    if is_directional(world):
+        light = np.zeros((s.size, 3)) if sky is None else np.asarray(sky, dtype=np.float64)
+        keep = np.isfinite(s) & nodes.allowed
+        return dataclasses.replace(nodes, sky=np.where(keep[:, None], light, 0.0))
     sky = np.where(np.isfinite(s), np.clip(1.0 - s, 0.0, 1.0), 0.0)
     sky = np.where(nodes.allowed, sky, 0.0)
     return dataclasses.replace(nodes,
@@ -196,12 +205,14 @@ class FormFactors:
 
 
 def form_factors(patches, nodes, settings, monitor, store=None, active=None, *, skip_late=None,
-                 all_nodes=False):
+                 all_nodes=False, sky=None):
     """Discovery from the emitters (only from new ones when ``store`` holds a bake's rows).
 
     ``skip_late(active, late) -> (len(late),) bool``: front nodes that get no late row (the
     radiosity mesh skips unlit surfaces: :func:`core.criteria.unlit_late_nodes`).
     ``all_nodes``: back nodes get late rows too (a world lights every side open to it).
+    ``sky``: a directional :class:`core.sky.Sky` whose light the rows gather (the store's
+    ``sky``).
     """
     P = len(patches.areas)
     N = 2 * P
@@ -210,7 +221,7 @@ def form_factors(patches, nodes, settings, monitor, store=None, active=None, *, 
         # Rows for nodes not reached before: a separate stream, so kept rows stay as they were.
         rng = np.random.default_rng([settings.seed, 1])
     rows_fn = row_function(patches, settings.method, settings.resolution,
-                           settings.rotate_hemicube, rng, settings.rays, settings.near)
+                           settings.rotate_hemicube, rng, settings.rays, settings.near, sky=sky)
     batcher = Batcher(N, row_seconds(patches, settings.method, settings.resolution,
                                      settings.rays))
     if store is None:
@@ -380,7 +391,7 @@ def _solve_matrix_free(ff, nodes, settings, monitor):
         if have.any():
             out[have] = store.rows(keys[have])
         if (~have).any():
-            out[~have] = rows_fn(keys[~have])
+            out[~have] = split_rows(rows_fn(keys[~have]))[0]
         return out
 
     recip = dict(asymmetry_before=None, sinkhorn_iterations=0,
@@ -435,10 +446,11 @@ def make_gather(scene, patches, node_radiance, settings, monitor, on_contact=Non
     sub = SubMonitor(monitor, ELEMENT_SHARE if elements is not None else 0.0, 1.0)
     rows = gather_rows(seen, groups, resolution=settings.resolution,
                        rotate=settings.rotate_hemicube,
-                       rng=np.random.default_rng([settings.seed, 2]), monitor=sub)
+                       rng=np.random.default_rng([settings.seed, 2]), monitor=sub,
+                       sky=None if direct is None else direct.sky)
     at_points = None
     if direct is not None:
-        at_points = direct.extra(groups.points, groups.normals, rows.row_sums)
+        at_points = direct.extra(groups.points, groups.normals, rows.row_sums, sky=rows.sky)
     return Gather(groups, rows, elements, at_points)
 
 

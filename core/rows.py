@@ -79,19 +79,28 @@ class RowStore:
         self.row_sums = np.full(n_rows, np.nan)    # full row sum of every computed row
         self.where = np.full((n_rows, 2), -1, dtype=np.int64)   # (batch, row) of each key
         self.nbytes = 0
+        # With a directional sky (core.sky): what each row's eye received of it through its
+        # empty pixels, (n_rows, 3); None without one.
+        self.sky = None
 
     def copy(self):
         new = RowStore(self.n_rows, self.n_cols)
         new.batches = list(self.batches)
         new.row_sums = self.row_sums.copy()
+        new.sky = None if self.sky is None else self.sky.copy()
         new.where = self.where.copy()
         new.nbytes = self.nbytes
         return new
 
-    def add(self, keys, rows):
-        """Keep ``rows`` (S, n_cols) of ``keys`` (S,), compacted; returns the columns hit (K,)."""
+    def add(self, keys, rows, sky=None):
+        """Keep ``rows`` (S, n_cols) of ``keys`` (S,), compacted, and their sky light ``sky``
+        (S, 3) if given; returns the columns hit (K,)."""
         cols, vals = compact_rows(rows)
         self.add_compact(keys, cols, vals, rows.sum(axis=1))
+        if sky is not None:
+            if self.sky is None:
+                self.sky = np.zeros((self.n_rows, 3))
+            self.sky[keys] = sky
         return cols
 
     def add_compact(self, keys, cols, vals, row_sums=None):
@@ -157,8 +166,23 @@ class RowStore:
         return out
 
 
-def row_function(patches, method, resolution, rotate, rng, rays, near=BY_NAME["near"].default):
-    """Return rows(sources (S,) int64) -> (S, 2P) float64 for the chosen method."""
+def row_function(patches, method, resolution, rotate, rng, rays, near=BY_NAME["near"].default,
+                 sky=None):
+    """Return rows(sources (S,) int64) -> (S, 2P) float64 for the chosen method.
+
+    With a directional ``sky`` (:class:`core.sky.Sky`; the hemicube only) rows returns
+    ``(rows, sky light (S, 3))`` (:func:`split_rows` takes them apart).
+    """
+    if sky is not None and method != "hemicube":
+        raise SettingsError(f"method={method!r} cannot carry a sky that varies with direction "
+                            "(sky='cie_overcast'): use method='hemicube'")
+    if method == "hemicube" and sky is not None:
+        def rows(sources):
+            light = np.zeros((len(sources), 3))
+            out = hemicube_rows(patches, sources, resolution=resolution, rotate=rotate, rng=rng,
+                                sky=sky, sky_out=light)
+            return out, light
+        return rows
     if method == "hemicube":
         def rows(sources):
             return hemicube_rows(patches, sources, resolution=resolution, rotate=rotate, rng=rng)
@@ -186,6 +210,11 @@ def row_function(patches, method, resolution, rotate, rng, rays, near=BY_NAME["n
         return hybrid_rows(patches, sources, resolution=resolution, rays=rays, rng=rng,
                            bvh=bvh, rotate=rotate, near=near)
     return rows
+
+
+def split_rows(rows):
+    """(rows, sky light or None) of what a :func:`row_function` returned."""
+    return rows if isinstance(rows, tuple) else (rows, None)
 
 
 def row_seconds(patches, method, resolution, rays):
@@ -255,7 +284,7 @@ def form_factor_matrix(patches, *, method="hemicube", resolution=64, rotate=Fals
     done = 0
     while done < n:
         sources = np.arange(done, min(done + batcher.size, n), dtype=np.int64)
-        out[sources] = batcher.rows(fn, sources)
+        out[sources] = split_rows(batcher.rows(fn, sources))[0]
         done = sources[-1] + 1
         monitor.update(done / n, "form factors")
     return out
@@ -279,8 +308,8 @@ def discover(store, rows_fn, allowed, start_active, frontier, monitor, budget, b
         next_wave = np.zeros(store.n_cols, dtype=bool)
         while pos < len(pending):
             sources = pending[pos:pos + batcher.size]
-            rows = batcher.rows(rows_fn, sources)
-            hit = store.add(sources, rows)
+            rows, sky = split_rows(batcher.rows(rows_fn, sources))
+            hit = store.add(sources, rows, sky)
             pos += len(sources)
             if expand:
                 new = hit[allowed[hit] & ~active[hit]]

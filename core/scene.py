@@ -14,6 +14,7 @@ from .constants import MAX_REFLECTANCE_EXCLUSIVE, tol
 from .errors import SceneError
 from .geometry import ragged
 from .light_list import Lights, make_lights
+from .sky import Sky
 
 
 @dataclass(frozen=True, eq=False)
@@ -50,9 +51,10 @@ class Scene:
         (marked invalid) stands for, -1 for other faces. None: not checked.
     lights : core.light_list.Lights or None
         Point, spot and sun lights (:func:`core.light_list.make_lights`); None: none.
-    world : (3,) float64 or None
+    world : (3,) float64, core.sky.Sky or None
         Radiance of a uniform world (Blender's world colour x strength) seen in every direction
-        no surface covers; None: black.
+        no surface covers, or a sky whose radiance varies with direction (:mod:`core.sky`, lit
+        through the hemicube's empty pixels); None: black.
     """
 
     vertices: np.ndarray
@@ -183,8 +185,9 @@ def make_scene(vertices, corner_verts, face_starts, face_sizes, face_materials, 
         Material of the back sides (default: the same as the front). Same rules as the front.
     lights : core.light_list.Lights or sequence of dict, optional
         Point, spot and sun lights (dicts go through :func:`core.light_list.make_lights`).
-    world : (3,) float, optional
-        Radiance of a uniform world, RGB, >= 0 (Blender: world colour x strength).
+    world : (3,) float or core.sky.Sky, optional
+        Radiance of a uniform world, RGB, >= 0 (Blender: world colour x strength), or a sky
+        that varies with direction (e.g. :class:`core.sky.CIEOvercast`).
 
     Returns
     -------
@@ -305,7 +308,7 @@ def make_scene(vertices, corner_verts, face_starts, face_sizes, face_materials, 
         lights = make_lights(lights)
     if lights is not None and len(lights) == 0:
         lights = None
-    if world is not None:
+    if world is not None and not isinstance(world, Sky):
         world = np.array(world, dtype=np.float64).reshape(-1)
         if world.shape != (3,) or not np.all(np.isfinite(world)) or np.any(world < 0):
             raise SceneError(f"world must be 3 finite radiances >= 0 (RGB); got {world.tolist()}")

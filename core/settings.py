@@ -193,6 +193,12 @@ OUTPUTS = (
     Choice("vertices", "Existing Vertices", "Colours only at the vertices you modelled (for "
            "pre-meshed assets); the report says how much the light varies inside your faces"),
 )
+SKIES = (
+    Choice("world", "World", "The scene's world: a uniform colour seen in every direction no "
+           "surface covers (or none)"),
+    Choice("cie_overcast", "CIE Overcast", "CIE standard overcast sky, L = Lz (1 + 2 cos t) / 3 "
+           "from the zenith (+Z up), nothing below the horizon; replaces the world"),
+)
 
 #: The settings table. Order: the panel's and the report's.
 TABLE = (
@@ -318,6 +324,17 @@ TABLE = (
             exposed=True,
             doc="At most 64 emissive faces and 10 % of the surfaces' area, by material "
                 "(core.emitters); the hemicube then carries only what they reflect."),
+    Setting("sky", "choice", "world", "Sky", "What lights the scene from outside", choices=SKIES,
+            exposed=True,
+            doc="'cie_overcast' (core.sky) is gathered per direction through each hemicube's "
+                "empty pixels: method='hemicube' only. The ground is not modelled unless you "
+                "model it."),
+    Setting("sky_illuminance", "float", 10_000.0, "Sky Lux",
+            "'cie_overcast': the outdoor illuminance on an unobstructed horizontal plane; "
+            "daylight factors are relative to it", unit="lx", low=0, open_low=True,
+            soft=(1000.0, 100_000.0), digits=0, exposed=True,
+            doc="10 000 lx is the usual daylight-factor convention; Lz = 9 E / (7 pi 683) "
+                "W/(m^2 sr), white (683 lm/W, as core.lux)."),
     Setting("workers", "int", None, "Workers",
             "Processes that compute the hemicubes; auto (0 in the panel): one per core; 1: "
             "this process only. The result is the same for any number", low=1, high=256,
@@ -355,6 +372,9 @@ def _post_init(self):
         row.check(getattr(self, name))
         if getattr(self, name) is None and row.auto_value is not None:
             object.__setattr__(self, name, row.auto_value)
+    if self.sky != "world" and self.method != "hemicube":
+        raise SettingsError(f"sky={self.sky!r} needs method='hemicube' (a sky that varies with "
+                            f"direction is gathered by the hemicube); got method={self.method!r}")
 
 
 BakeSettings = dataclasses.make_dataclass(

@@ -6,14 +6,16 @@ Two ways to run it::
     python radiosity_addon/batch.py scene.blend --output baked.blend      # bpy module
 
 Options: ``--report report.json``, ``--render out.png`` (Workbench render of the baked colours from
-the scene camera), ``--patch-size``, ``--method``, ``--resolution``, ``--solver``, ``--tolerance``,
-``--max-iterations``, ``--selected-only``, ``--make-single-user``, ``--in-place``. Anything not given
-comes from the .blend's own bake settings (Scene > Radiosity). The input is never overwritten unless
-``--in-place``; outputs are written to a temporary file and renamed. Every output path is checked
-before the bake (its folder exists and is writable, it is not a folder). Any error exits with
-status 1 (2 for a bad option) and one line on stderr that names the path or option as given; this
-holds for failures before the package loads too (NumPy missing from a distribution's Blender,
-options given without ``--``), where Blender alone would print a traceback and exit 0.
+the scene camera), ``--render-lux lux.png`` (the same view of the lux in false colour, with its
+legend; ``--lux-scale linear|log``, ``--lux-max LX|auto``), ``--patch-size``, ``--method``,
+``--resolution``, ``--solver``, ``--tolerance``, ``--max-iterations``, ``--selected-only``,
+``--make-single-user``, ``--in-place``. Anything not given comes from the .blend's own bake
+settings (Scene > Radiosity). The input is never overwritten unless ``--in-place``; outputs are
+written to a temporary file and renamed. Every output path is checked before the bake (its folder
+exists and is writable, it is not a folder). Any error exits with status 1 (2 for a bad option)
+and one line on stderr that names the path or option as given; this holds for failures before the
+package loads too (NumPy missing from a distribution's Blender, options given without ``--``),
+where Blender alone would print a traceback and exit 0.
 """
 
 import argparse
@@ -87,6 +89,7 @@ def build_parser(need_input):
     """
     # Imported here, not at the top: this file also runs as a plain script (``__main__``),
     # where the package's relative imports exist only once _load_package() has run.
+    from ..core.falsecolour import SETTINGS as LUX_SETTINGS
     from .props import OPTIONS
 
     p = _Parser(prog=PROG, description="Bake radiosity into vertex colours, headless. Bake "
@@ -103,7 +106,10 @@ def build_parser(need_input):
     p.add_argument("--lux", help="write the calculation surfaces' grid illuminance here: "
                                  ".csv (object, x, y, z, lux per point) or .json (per surface: "
                                  "Emin, Eavg, Emax, U0, grid points and their lux)")
-    for row in OPTIONS:
+    p.add_argument("--render-lux", metavar="FILE.png",
+                   help="render the illuminance in false colour (Workbench, scene camera) with "
+                        "a legend in lux to this PNG")
+    for row in OPTIONS + LUX_SETTINGS:
         add_option(p, row)
     return p
 
@@ -276,6 +282,11 @@ def run(argv):
     report_path = args.report and _output_path("--report", args.report, taken)
     if args.render and bpy.context.scene.camera is None:
         raise BatchError("--render needs a scene camera; the scene has none")
+    render_lux = args.render_lux and _output_path("--render-lux", args.render_lux, taken)
+    if args.render_lux and os.path.splitext(args.render_lux)[1].lower() != ".png":
+        raise BatchError(f"--render-lux {args.render_lux}: give a .png file name")
+    if args.render_lux and bpy.context.scene.camera is None:
+        raise BatchError("--render-lux needs a scene camera; the scene has none")
     lux_path = args.lux and _output_path("--lux", args.lux, taken)
     if args.lux and os.path.splitext(args.lux)[1].lower() not in (".csv", ".json"):
         raise BatchError(f"--lux {args.lux}: give a .csv or .json file name")
@@ -318,6 +329,13 @@ def run(argv):
                       lambda tmp: render_baked(bpy.context.scene, tmp))
         report["render"] = render
         _say(f"rendered the baked colours -> {args.render}")
+    if render_lux:
+        report["lux_scale"] = show_lux(bpy.context.scene, args).as_dict()
+        _atomic_write("--render-lux", args.render_lux, render_lux,
+                      lambda tmp: render_false_colour(bpy.context.scene, tmp,
+                                                      report["lux_scale"]))
+        report["render_lux"] = render_lux
+        _say(f"rendered the lux in false colour -> {args.render_lux}")
     if lux_path:
         _atomic_write("--lux", args.lux, lux_path,
                       lambda tmp: write_lux_file(tmp, bake_input.extraction.surfaces,
@@ -376,6 +394,35 @@ def render_baked(scene, path):
     # Workbench draws with the GPU; the module build renders off-screen without a window.
     scene.render.use_file_extension = False
     bpy.ops.render.render(write_still=True)
+
+
+def show_lux(scene, args):
+    """Show the bake's lux in false colour (luxview.show) on the scale the options ask for;
+    options not given come from the scene's Lux Scale and Lux Max."""
+    from .luxview import LuxViewError, scale_settings, show
+
+    mode, top = scale_settings(scene.radiosity)
+    if args.lux_scale is not None:
+        mode = args.lux_scale
+    if args.lux_max is not None:
+        top = None if args.lux_max is AUTO else args.lux_max
+    try:
+        return show(scene, (mode, top))
+    except LuxViewError as exc:
+        raise BatchError(f"--render-lux: {exc}") from None
+
+
+def render_false_colour(scene, path, scale):
+    """Render the false-colour display (:func:`render_baked`, colours exactly as stored: exposure
+    0, gamma 1, no curves, no dither) and add the legend of *scale* (``Scale.as_dict()``)."""
+    from ..core.falsecolour import Scale
+    from .luxview import add_legend
+
+    view = scene.view_settings
+    view.exposure, view.gamma, view.use_curve_mapping = 0.0, 1.0, False
+    scene.render.dither_intensity = 0.0
+    render_baked(scene, path)
+    add_legend(path, Scale(scale["mode"], scale["top"], scale["bottom"], tuple(scale["ticks"])))
 
 
 def main(argv=None):

@@ -18,6 +18,7 @@ from ..core.light_list import make_lights
 from ..core.photometry import read_photometry
 from .materials import MaterialReader, area_light_polygon, area_light_radiance
 from .surfaces import is_calc_surface, read_surface
+from .world_map import read_world
 
 #: An area light is modelled as a one-sided emitting polygon: its front emits the converted
 #: radiance, it reflects nothing, and its back side is black (the core's back_reflectance /
@@ -158,8 +159,14 @@ ATTRIBUTE = "Radiosity"
 #: per point on calculation surfaces. With ATTRIBUTE, the only ones it touches or clears.
 LUX_ATTRIBUTE = "Radiosity Lux"
 
+LUX_COLOUR_ATTRIBUTE = "Radiosity Lux Colour"  #: lux in false colour, while shown (luxview.py)
+#: Name of the FLOAT attribute of the daylight factor (%), beside the lux after a bake under a
+#: sky (``sky='cie_overcast'``).
+DF_ATTRIBUTE = "Radiosity Daylight Factor"
+
 #: Attributes a baked mesh gets otherwise (geometry, UV maps, material, shading) or never keeps.
-OWN_ATTRIBUTES = {"position", "material_index", "sharp_face", ATTRIBUTE, LUX_ATTRIBUTE}
+OWN_ATTRIBUTES = {"position", "material_index", "sharp_face", ATTRIBUTE, LUX_ATTRIBUTE,
+                  DF_ATTRIBUTE, LUX_COLOUR_ATTRIBUTE}
 
 
 def read_attributes(mesh):
@@ -357,9 +364,11 @@ def _extract(depsgraph, selected_only):
     if out.instances:
         out.notes.append(f"{out.instances} instance(s) light and shadow the scene but receive no "
                          "colours (they share their source's mesh)")
-    world_radiance, world_note = read_world(scene)
+    world_radiance, world_sun, world_note = read_world(scene)
     if world_note:
-        out.warnings.append(world_note)
+        out.notes.append(world_note)
+    if world_sun is not None:
+        light_dicts.append(world_sun)
     out.warnings.extend(f"{kind} lights are not supported yet and were ignored: {_names(names)}"
                         for kind, names in unsupported.items())
     out.warnings.extend(f"{what}: {_names(names)}" for what, names in light_notes.items())
@@ -555,40 +564,3 @@ def _names(names, limit=5):
     uniq = list(dict.fromkeys(names))
     text = ", ".join(f"'{n}'" for n in uniq[:limit])
     return text + (f" and {len(uniq) - limit} more" if len(uniq) > limit else "")
-
-
-def read_world(scene):
-    """(radiance (3,) or None, warning or None) of the scene's world.
-
-    A uniform world (the world colour, or a Background node whose Color and Strength are not
-    linked) is baked: radiance = colour x strength, what Cycles' diffuse rays see where they
-    hit nothing. A textured world or another shader is not supported yet: a warning, and black.
-    """
-    world = scene.world
-    if world is None:
-        return None, None
-    colour, strength = np.array(world.color[:3], dtype=np.float64), 1.0
-    tree = world.node_tree
-    if bpy.app.version < (5, 0, 0) and not world.use_nodes:  # always on (deprecated) in 5
-        tree = None
-    if tree is not None:
-        outs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld"]
-        surface = outs[0].inputs.get("Surface") if outs else None
-        if surface is None or not surface.is_linked:
-            return None, None
-        node = surface.links[0].from_node
-        if node.bl_idname != "ShaderNodeBackground":
-            return None, (f"World '{world.name}' lighting ({node.name}) is not supported yet "
-                          "and was ignored")
-        c_in, s_in = node.inputs["Color"], node.inputs["Strength"]
-        if c_in.is_linked or s_in.is_linked:
-            return None, (f"World '{world.name}' lighting (textured) is not supported yet and "
-                          "was ignored")
-        colour = np.array(c_in.default_value[:3], dtype=np.float64)
-        strength = float(s_in.default_value)
-    radiance = np.maximum(colour * strength, 0.0)
-    if not np.any(radiance > 0):
-        return None, None
-    if world.cycles_visibility.diffuse is False:
-        return None, None
-    return radiance, None

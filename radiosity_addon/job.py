@@ -18,7 +18,8 @@ from .. import core
 from ..core.errors import BakeCancelled, RadiosityError
 from ..core.lux import lux
 from ..core.settings import EXPOSED, as_dict
-from . import surfaces
+from ..core.sky import sky_for
+from . import luxview, surfaces
 from .extract import extract
 from .props import OPTIONS, from_blender
 from .write import (WriteError, check_writable, is_baked, show_in_viewports, write_colours,
@@ -87,12 +88,16 @@ def prepare(context, options):
     if not ext.parts:
         what = "selected mesh objects" if options["selected_only"] else "visible mesh objects"
         raise BakeError(f"Nothing to bake: no {what} with faces")
-    if not _has_light(ext.arrays):
+    arrays = ext.arrays
+    sky = sky_for(settings, arrays.get("world"))      # sky='cie_overcast' replaces the world
+    if sky is not arrays.get("world"):
+        arrays = dict(arrays, world=sky)
+    if not _has_light(arrays):
         unsupported = "; ".join(w for w in ext.warnings if "not supported" in w)
         raise BakeError("No light: add an emissive material or a light"
                         + (f" ({unsupported})" if unsupported else ""))
     try:
-        scene = core.make_scene(**ext.arrays)
+        scene = core.make_scene(**arrays)
     except RadiosityError as exc:
         raise BakeError(str(exc)) from exc
     objects = context.scene.objects
@@ -112,8 +117,8 @@ def prepare(context, options):
 
 
 def _has_light(arrays):
-    """Whether anything emits: an emissive face, a point, spot or sun light of power > 0, or a
-    world colour."""
+    """Whether anything emits: an emissive face, a point, spot or sun light of power > 0, a
+    world colour or a sky."""
     if (arrays["emission"][arrays["face_materials"]] > 0).any() or arrays.get("world") is not None:
         return True
     lights = arrays.get("lights")
@@ -169,14 +174,16 @@ def apply(context, bake_input, result):
     scene = context.scene
     objects = {o.name: o for o in scene.objects}
     output = getattr(result, "output", None)
+    outdoor = result.report.get("sky", {}).get("outdoor_lux")     # daylight factors beside lux
     try:
         if output is not None:
-            written = write_mesh(objects, bake_input.extraction.parts, output)
+            written = write_mesh(objects, bake_input.extraction.parts, output, outdoor=outdoor)
         else:
             incident = getattr(result, "corner_incident", None)
             write_colours(objects, bake_input.extraction.parts, result.corner_colours,
                           make_single_user=bake_input.make_single_user,
-                          corner_lux=None if incident is None else lux(incident))
+                          corner_lux=None if incident is None else lux(incident),
+                          outdoor=outdoor)
             written = None
         surfaces.write(objects, bake_input.extraction.surfaces)
     except (WriteError, KeyError) as exc:
@@ -189,6 +196,11 @@ def apply(context, bake_input, result):
         props.last_report = json.dumps(report)
         if props.show_bake:
             show_in_viewports([w.screen for w in context.window_manager.windows], True)
+    if luxview.is_shown(scene):          # lux in false colour: the new bake's, on its scale
+        try:
+            luxview.show(scene)
+        except (luxview.LuxViewError, ValueError):
+            luxview.hide(scene)
     return report
 
 

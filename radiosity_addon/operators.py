@@ -6,6 +6,7 @@ import bpy
 
 from ..core.errors import BakeCancelled
 from .job import BakeError, BakeJob, apply, bake_now, options_from_props, prepare
+from .luxview import hide as hide_lux
 from .write import clear_bake
 
 #: Seconds between modal timer ticks: progress refresh and the latency of Esc (the worker itself
@@ -174,6 +175,7 @@ class RADIOSITY_OT_clear(bpy.types.Operator):
 
     def execute(self, context):
         props = context.scene.radiosity
+        hide_lux(context.scene)        # the false-colour display's settings come back first
         objs = [o for o in context.scene.objects if o.type == "MESH"]
         if props.selected_only:
             objs = [o for o in objs if o.select_get()]

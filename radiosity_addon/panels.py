@@ -91,6 +91,7 @@ class VIEW3D_PT_radiosity(bpy.types.Panel):
             row.prop(props, "show_bake", text="Show")
             row.operator("radiosity.clear", text="Clear", icon="X")
             box.prop(context.scene.view_settings, "exposure", text="Exposure")
+            draw_lux(box, context.scene)
         else:
             box.label(text="No bake in this scene yet")
 
@@ -100,6 +101,18 @@ class VIEW3D_PT_radiosity(bpy.types.Panel):
         header.label(text="Advanced")
         if body is not None:
             draw_advanced(body, props)
+
+
+def draw_lux(layout, scene):
+    """The false-colour lux display's toggle and scale (radiosity_addon.luxview)."""
+    from .luxview import is_shown
+
+    props = scene.radiosity
+    col = layout.column(align=True)
+    col.operator("radiosity.lux_display", icon="COLOR", depress=is_shown(scene))
+    row = col.row(align=True)
+    row.prop(props, "lux_scale", text="")
+    row.prop(props, "lux_max", text="Max (auto)" if props.lux_max == 0 else "Max")
 
 
 def draw_advanced(layout, props):
@@ -116,6 +129,8 @@ def draw_advanced(layout, props):
     layout.prop(props, "light_samples")
     layout.prop(props, "workers", text="Workers (auto)" if props.workers == 0 else "Workers")
     _split_row(layout, "Emitters").prop(props, "exact_direct", text="")
+    _split_row(layout, "Sky").prop(props, "sky", text="")
+    layout.prop(props, "sky_illuminance")
     col = layout.column()
     col.prop(props, "contact_cuts")
     col.prop(props, "selected_only")

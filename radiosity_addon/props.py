@@ -10,6 +10,7 @@ import dataclasses
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
+from ..core.falsecolour import SETTINGS as LUX_SETTINGS
 from ..core.settings import BY_NAME, EXPOSED, Setting
 from .write import show_in_viewports
 
@@ -55,9 +56,12 @@ def _make_even(name):
     return update
 
 
-def make_property(row):
-    """The bpy property of one settings row (label, tooltip, default, bounds, unit)."""
+def make_property(row, update=None):
+    """The bpy property of one settings row (label, tooltip, default, bounds, unit); *update*:
+    its update callback."""
     common = dict(name=row.label, description=row.help)
+    if update is not None:
+        common["update"] = update
     default = row.default
     if row.auto:                      # None ("auto") is 0 in the panel
         default = 0 if default is None else default
@@ -84,6 +88,11 @@ def make_property(row):
     return FloatProperty(default=default, **limits, **common)
 
 
+def _lux_changed(self, context):
+    from .luxview import settings_changed
+    settings_changed(self, context)
+
+
 def _show_bake_changed(self, context):
     wm = context.window_manager
     if wm is not None:
@@ -92,6 +101,8 @@ def _show_bake_changed(self, context):
 
 class RadiositySettings(bpy.types.PropertyGroup):
     __annotations__ = {row.name: make_property(row) for row in OPTIONS}
+    # The false-colour display's scale (core.falsecolour.SETTINGS): not bake options.
+    __annotations__.update({row.name: make_property(row, _lux_changed) for row in LUX_SETTINGS})
     __annotations__.update(
         show_bake=BoolProperty(name="Show Bake", default=True, update=_show_bake_changed,
                                description="Show the baked colours flat in Solid viewports"),

@@ -37,7 +37,10 @@ class CalcSurface:
     grid_lux, vertex_lux : float64 arrays
         Illuminance (lx) at the grid points and the vertices.
     summary : dict
-        ``core.lux.summary`` of the grid, plus ``object`` and ``cell_area`` (m²).
+        ``core.lux.summary`` of the grid, plus ``object`` and ``cell_area`` (m²); with a sky
+        (``sky='cie_overcast'``) also the daylight factors ``DFmin``, ``DFavg``, ``DFmax`` (%).
+    outdoor : float or None
+        The sky's outdoor horizontal illuminance (lx) the daylight factors divide by.
     """
 
     object_name: str
@@ -50,6 +53,7 @@ class CalcSurface:
     grid_lux: np.ndarray = None
     vertex_lux: np.ndarray = None
     summary: dict = field(default_factory=dict)
+    outdoor: float = None
 
 
 def is_calc_surface(obj):
@@ -87,6 +91,7 @@ def read_surface(obj, matrix, layout):
 
 def measure(result, surfaces, cancel=None):
     """Gather every surface's grid and vertices after the bake (fills them in place)."""
+    outdoor = result.report.get("sky", {}).get("outdoor_lux")
     for surf in surfaces:
         if cancel is not None and cancel():
             raise BakeCancelled("cancelled while measuring calculation surfaces")
@@ -95,17 +100,19 @@ def measure(result, surfaces, cancel=None):
                                       np.concatenate([nrm, surf.vertex_normals]))
         surf.grid, surf.grid_normals, surf.weights = pts, nrm, w
         surf.grid_lux, surf.vertex_lux = both[:pts.shape[0]], both[pts.shape[0]:]
+        surf.outdoor = outdoor
         surf.summary = dict(object=surf.object_name, cell_area=float(w[0]),
-                            **corelux.summary(surf.grid_lux, w))
+                            **corelux.summary(surf.grid_lux, w, outdoor=outdoor))
 
 
 def write(objects, surfaces):
-    """The vertex illuminance of every measured surface, as its mesh's ``Radiosity Lux``."""
+    """The vertex illuminance of every measured surface, as its mesh's ``Radiosity Lux`` (and,
+    under a sky, ``Radiosity Daylight Factor``)."""
     from .write import write_lux
 
     for surf in surfaces:
         mesh = objects[surf.object_name].data
-        write_lux(mesh, surf.vertex_lux, "POINT")
+        write_lux(mesh, surf.vertex_lux, "POINT", outdoor=surf.outdoor)
         mesh.update()
 
 

@@ -27,8 +27,9 @@ import numpy as np
 from ..core import transfer
 from ..core.geometry import ragged
 from ..core.transfer import CORNER_INSET  # noqa: F401  (the tolerance of the corner mapping)
-from ..core.lux import lux
-from .extract import ATTRIBUTE, ATTRIBUTE_TYPES, LUX_ATTRIBUTE, read_mesh_layout, transform
+from ..core.lux import daylight_factor, lux
+from .extract import (ATTRIBUTE, ATTRIBUTE_TYPES, DF_ATTRIBUTE, LUX_ATTRIBUTE,
+                      LUX_COLOUR_ATTRIBUTE, read_mesh_layout, transform)
 
 #: Object custom property: the original mesh (an ID pointer) while the object shows a baked mesh.
 PROP_ORIGINAL = "radiosity_original"
@@ -279,38 +280,48 @@ def write_attribute(mesh, colours):
     mesh.update()
 
 
-def write_lux(mesh, values, domain):
+def write_lux(mesh, values, domain, outdoor=None):
     """Write illuminance (lx) as the FLOAT attribute :data:`LUX_ATTRIBUTE` of *mesh* on
-    ``domain`` ('CORNER' or 'POINT'), replacing ours if it is there."""
+    ``domain`` ('CORNER' or 'POINT'), replacing ours if it is there; with ``outdoor`` (lx, a
+    sky's horizontal illuminance) the daylight factor (%) too, as :data:`DF_ATTRIBUTE` (else
+    an old one is removed)."""
     n = len(mesh.loops) if domain == "CORNER" else len(mesh.vertices)
     values = np.asarray(values, dtype=np.float64).reshape(-1)
     if values.shape != (n,):
         raise WriteError(f"illuminance for mesh '{mesh.name}' must have {n} values "
                          f"({domain.lower()}s); got {values.size}")
-    attr = mesh.attributes.get(LUX_ATTRIBUTE)
-    if attr is not None:
-        mesh.attributes.remove(attr)
+    for name in (LUX_ATTRIBUTE, DF_ATTRIBUTE):
+        attr = mesh.attributes.get(name)
+        if attr is not None:
+            mesh.attributes.remove(attr)
     mesh.attributes.new(LUX_ATTRIBUTE, "FLOAT", domain).data.foreach_set(
         "value", values.astype(np.float32))
+    if outdoor is not None:
+        mesh.attributes.new(DF_ATTRIBUTE, "FLOAT", domain).data.foreach_set(
+            "value", daylight_factor(values, outdoor).astype(np.float32))
 
 
 def clear_attribute(mesh):
-    """Remove our attributes (colours, lux) from *mesh*; True if there was one."""
+    """Remove our attributes (colours, lux, daylight factor, lux in false colour) from *mesh*;
+    True if there was one."""
     found = False
-    attr = mesh.color_attributes.get(ATTRIBUTE)
-    if attr is not None:
-        mesh.color_attributes.remove(attr)
-        found = True
-    attr = mesh.attributes.get(LUX_ATTRIBUTE)
-    if attr is not None:
-        mesh.attributes.remove(attr)
-        found = True
+    for name in (ATTRIBUTE, LUX_COLOUR_ATTRIBUTE):
+        attr = mesh.color_attributes.get(name)
+        if attr is not None:
+            mesh.color_attributes.remove(attr)
+            found = True
+    for name in (LUX_ATTRIBUTE, DF_ATTRIBUTE):
+        attr = mesh.attributes.get(name)
+        if attr is not None:
+            mesh.attributes.remove(attr)
+            found = True
     if found:
         mesh.update()
     return found
 
 
-def write_colours(objects, parts, corner_colours, *, make_single_user, corner_lux=None):
+def write_colours(objects, parts, corner_colours, *, make_single_user, corner_lux=None,
+                  outdoor=None):
     """Write the bake's colours to the original meshes.
 
     Parameters
@@ -323,6 +334,8 @@ def write_colours(objects, parts, corner_colours, *, make_single_user, corner_lu
     make_single_user : bool
     corner_lux : (C,) float64, optional
         Illuminance (lx) at the scene corners, written as :data:`LUX_ATTRIBUTE`.
+    outdoor : float, optional
+        A sky's outdoor illuminance (lx): the daylight factor is written too (:func:`write_lux`).
 
     Returns
     -------
@@ -346,7 +359,8 @@ def write_colours(objects, parts, corner_colours, *, make_single_user, corner_lu
             eval_lux = np.empty((eval_colours.shape[0], 3))
             eval_lux[part.eval_corner_of_scene] = corner_lux[part.corner_start:
                                                              part.corner_stop, None]
-            write_lux(mesh, map_to_original(part, eval_lux, layout)[:, 0], "CORNER")
+            write_lux(mesh, map_to_original(part, eval_lux, layout)[:, 0], "CORNER",
+                      outdoor=outdoor)
     return len(parts)
 
 
@@ -480,11 +494,11 @@ def new_mesh(name, arrays, part, materials):
     mesh[PROP_BAKED] = 1
     write_attribute(mesh, arrays["colours"])
     if arrays.get("lux") is not None:
-        write_lux(mesh, arrays["lux"], "CORNER")
+        write_lux(mesh, arrays["lux"], "CORNER", outdoor=arrays.get("outdoor"))
     return mesh
 
 
-def write_mesh(objects, parts, output):
+def write_mesh(objects, parts, output, outdoor=None):
     """Give every baked object its baked mesh (the radiosity mesh over its faces).
 
     Parameters
@@ -493,6 +507,8 @@ def write_mesh(objects, parts, output):
         Original objects by name.
     parts : list of extract.Part
     output : core.outmesh.OutputMesh
+    outdoor : float, optional
+        A sky's outdoor illuminance (lx): the daylight factor is written beside the lux.
 
     Returns
     -------
@@ -506,7 +522,7 @@ def write_mesh(objects, parts, output):
     # Everything is computed before the first object changes: an error leaves the scene as is.
     built = []
     for part, faces in zip(parts, per_part):
-        built.append(part_mesh(part, output, faces))
+        built.append(dict(part_mesh(part, output, faces), outdoor=outdoor))
     summary = []
     memory = _Memory()
     for obj, part, arrays in zip(targets, parts, built):

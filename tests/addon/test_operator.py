@@ -376,7 +376,7 @@ def test_unsupported_lights_world_and_non_mesh_objects_are_named(package):
     curve = bpy.data.curves.new("Txt", "FONT")
     bpy.context.scene.collection.objects.link(bpy.data.objects.new("Label", curve))
     bpy.context.scene.collection.objects.link(bpy.data.objects.new("Empty", None))
-    world = bpy.data.worlds.new("Sky")        # a textured world: not baked yet (a uniform one is)
+    world = bpy.data.worlds.new("Sky")        # a textured world: baked from a rendered map
     if bpy.app.version < (5, 0, 0):
         world.use_nodes = True
     nodes = world.node_tree.nodes
@@ -387,7 +387,9 @@ def test_unsupported_lights_world_and_non_mesh_objects_are_named(package):
     text = " | ".join(report["warnings"])
     assert "'Bulb'" not in text       # point lights are baked (tests/addon/test_lights.py)
     assert "non-uniform scale" in text and "'Oval'" in text
-    assert "'Label'" in text and "World 'Sky' lighting (textured)" in text
+    assert "'Label'" in text and "World" not in text
+    notes = " | ".join(report["notes"])
+    assert "World 'Sky' (Background) is lit from a 64 x 32 map rendered by Cycles" in notes
 
 
 def test_area_lights_match_an_emitting_polygon_of_the_converted_radiance(package):

@@ -201,6 +201,23 @@ def scenario():
     yield 1.0
     screenshot("advanced_open.png")
 
+    # The lux display, as its button runs it: false colour in the viewport and the legend drawn
+    # by the draw handler (where the bar went is read back to check its pixels).
+    luxview = __import__(MODULE + ".radiosity_addon.luxview", fromlist=["DRAWN"])
+    with bpy.context.temp_override(window=window, area=area, region=ui):
+        results["lux_display"] = sorted(bpy.ops.radiosity.lux_display())
+    redraw()
+    yield 1.0
+    results["lux_shading"] = shading()
+    results["lux_bar"] = dict(luxview.DRAWN)
+    results["lux_window_height"] = window.height
+    screenshot("lux_view.png")
+    with bpy.context.temp_override(window=window, area=area, region=ui):
+        bpy.ops.radiosity.lux_display()
+    redraw()
+    yield 0.5
+    results["lux_shading_off"] = shading()
+
     # The light's panel: a spot light made active, Properties > Light data shows its Radiosity
     # panel (the IES / EULUMDAT file field).
     lamp = bpy.data.objects.new("Spot", bpy.data.lights.new("Spot", "SPOT"))

@@ -14,6 +14,8 @@ import subprocess
 import numpy as np
 import pytest
 
+from core.falsecolour import RAMP
+
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 OUT = os.path.join(ROOT, "out", "ui")
 #: Esc must stop a bake within this many seconds (wall clock, key press to the panel's idle state).
@@ -140,7 +142,7 @@ def test_light_panel_shows_for_a_spot_light(session):
 
 
 @pytest.mark.parametrize("name", ["before_bake.png", "during_bake.png", "after_bake.png",
-                                  "advanced_open.png", "light_panel.png"])
+                                  "advanced_open.png", "light_panel.png", "lux_view.png"])
 def test_screenshot_is_not_blank(session, name):
     from PIL import Image
 
@@ -160,3 +162,35 @@ def test_baked_screenshot_shows_the_colours(session):
     after = np.asarray(Image.open(os.path.join(OUT, "after_bake.png")).convert("RGB"), float)
     view = (slice(150, 600), slice(100, 700))  # inside the camera frame of the 3D view
     assert np.abs(after[view] - before[view]).mean() > 5.0
+
+
+#: The bar's pixels against the ramp (sRGB bytes): the screenshot is lossless, but the bar's
+#: colours are interpolated across each quad by the GPU and blended over a translucent box edge.
+LEGEND_LEVELS = 12
+
+
+def test_lux_display_shows_false_colour_and_its_legend(session):
+    """The Show Lux button's operator in the real window: the viewport shows the false-colour
+    attribute, the draw handler draws the legend (its bar, sampled in the screenshot, runs
+    through the ramp from bottom to top) and a second press gives the shading back."""
+    from PIL import Image
+
+    results, _ = session
+    assert results["lux_display"] == ["FINISHED"]
+    assert results["lux_shading"]["type"] == "SOLID"
+    assert results["lux_shading"]["color_type"] == "VERTEX"
+    assert results["lux_shading_off"] == results["shading_show_on"]
+    bar = results["lux_bar"]
+    assert bar, "the legend was never drawn"
+    img = np.asarray(Image.open(os.path.join(OUT, "lux_view.png")).convert("RGB"), float)
+    x = int(round(bar["left"] + bar["width"] / 2))
+    ramp = np.array(RAMP) * 255.0
+    for t in np.linspace(0.05, 0.95, 10):
+        y_gl = bar["bottom"] + t * bar["height"]
+        row = int(round(results["lux_window_height"] - 1 - y_gl))
+        # The ramp is linear between its control points.
+        k = t * (len(ramp) - 1)
+        i = min(int(k), len(ramp) - 2)
+        want = ramp[i] + (k - i) * (ramp[i + 1] - ramp[i])
+        got = img[row, x]
+        assert np.abs(got - want).max() <= LEGEND_LEVELS, (t, got.tolist(), want.tolist())
