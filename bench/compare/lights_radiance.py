@@ -7,10 +7,19 @@ The room and lights of :mod:`bench.compare.lights`, written as a .rad file
 * ``sun``: ``light`` of radiance S / omega on a ``source`` of the sun's angular diameter, omega
   its solid angle (Radiance's sun: irradiance S on a surface facing it);
 * ``sky``: a ``glow`` of the world's radiance on a full-sphere ``source`` (what a uniform world
-  is).
+  is);
+* ``cie``: the CIE standard overcast sky from Radiance's own ``gensky -c -B E -g 0`` (horizontal
+  diffuse irradiance E = ``CIE_IRRADIANCE`` W/m^2, black ground) against ours with
+  ``sky='cie_overcast'`` at ``sky_illuminance`` = 683 E lx (core.sky; gensky's zenith radiance
+  is ours, 9 E / (7 pi)), both through the window only; 30 more sensors on a work plane 0.85 m
+  up, where daylight factors are read (ours: :func:`core.lux.illuminance_at`).
+
+* ``point``: each point light as a Radiance ``light`` sphere of its radius whose radiance gives
+  its intensity (``I = L pi r^2``); ours keeps the soft falloff ``1 / (d^2 + r^2)`` (Cycles'),
+  Radiance's sphere the exact ``1 / d^2``: 2.7 % apart on the ceiling right above a bulb.
 
 Sensors: 48 points on the ceiling (facing down) and 60 on two walls (facing in), none of them in
-direct light. Ours: a hemicube (R = 256) at the same points over a uniform 0.25 m bake's solved
+direct light of the sun. Ours: a hemicube (R = 256) at the same points over a uniform 0.25 m bake's solved
 patches, plus the lights' direct light and the world's uncovered part (``DirectLight.extra``).
 Radiance: ``-ab 10 -ad 4096 -aa 0`` (no irradiance cache: every sensor sampled).
 
@@ -28,6 +37,13 @@ import numpy as np
 
 from . import radiance
 from .lights import CASES, WORLDS, room_arrays
+
+#: Horizontal diffuse irradiance of the ``cie`` case (W/m^2): 68,300 lx at 683 lm/W.
+CIE_IRRADIANCE = 100.0
+
+#: Rec. 709 luminance weights (core.lux's): the ``cie`` case compares luminance, since the
+#: room's coloured surfaces tint Radiance's RGB while ours is read as illuminance.
+LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 PARAMS = ("-ab", "10", "-ad", "4096", "-as", "0", "-aa", "0", "-lw", "1e-6", "-lr", "-12",
           "-dj", "0", "-ds", "0", "-dt", "0", "-dc", "1", "-dr", "0", "-ss", "0", "-st", "1")
@@ -50,7 +66,26 @@ def sources(case):
     if case == "sky":
         return ("void glow skyglow 0 0 4 %s 0\nskyglow source sky 0 0 4 0 0 1 360\n"
                 % radiance._fmt(WORLDS["sky"]))
-    raise ValueError("case must be 'sun' or 'sky'; got %r" % (case,))
+    if case == "point":
+        text = ""
+        for i, light in enumerate(CASES["point"]):
+            # Ours and Cycles: I = P colour / (4 pi) W/sr; a Lambertian sphere of radius r and
+            # radiance L has I = L pi r^2 in every direction.
+            r = light["radius"]
+            L = light["power"] * np.asarray(light.get("color", (1, 1, 1)), float) \
+                / (4 * math.pi) / (math.pi * r * r)
+            text += ("void light bulb%d 0 0 3 %s\nbulb%d sphere bulb%d.s 0 0 4 %s %.9g\n"
+                     % (i, radiance._fmt(L), i, i, radiance._fmt(light["position"]), r))
+        return text
+    if case == "cie":
+        import pyradiance as pr
+
+        sky = pr.gensky(altitude=45.0, azimuth=0.0, cloudy=True, ground_reflectance=0.0,
+                        horizontal_brightness=CIE_IRRADIANCE).decode()
+        return (sky + "\nskyfunc glow sky_glow 0 0 4 1 1 1 0\n"
+                "sky_glow source sky 0 0 4 0 0 1 180\n"
+                "sky_glow source ground 0 0 4 0 0 -1 180\n")
+    raise ValueError("case must be 'point', 'sun', 'sky' or 'cie'; got %r" % (case,))
 
 
 def sensors():
@@ -65,7 +100,25 @@ def sensors():
     return points, normals, labels
 
 
+def ours_cie(points, normals):
+    """Irradiance (n, 3) under ``sky='cie_overcast'`` at the gensky case's outdoor level."""
+    from core.bake import bake
+    from core.lux import LUMENS_PER_WATT, illuminance_at
+    from core.scene import make_scene
+    from core.settings import BakeSettings
+    from core.sky import CIEOvercast, zenith_radiance
+
+    lux = LUMENS_PER_WATT * CIE_IRRADIANCE
+    scene = make_scene(**room_arrays(), world=CIEOvercast(zenith_radiance(lux)))
+    res = bake(scene, BakeSettings(output_mode="vertices", patch_size=0.25, element_levels=0,
+                                   sky="cie_overcast", sky_illuminance=lux))
+    E = illuminance_at(res, points + LIFT * normals, normals) / LUMENS_PER_WATT
+    return np.repeat(E[:, None], 3, axis=1)
+
+
 def ours(case, points, normals):
+    if case == "cie":
+        return ours_cie(points, normals)
     from core.bake import bake
     from core.hemicube import point_rows
     from core.lights import DirectLight
@@ -83,12 +136,19 @@ def ours(case, points, normals):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--cases", nargs="+", default=["sun", "sky"], choices=["sun", "sky"])
+    ap.add_argument("--cases", nargs="+", default=["point", "sun", "sky", "cie"],
+                    choices=["point", "sun", "sky", "cie"])
     ap.add_argument("--nproc", type=int, default=2)
     args = ap.parse_args(argv)
     points, normals, labels = sensors()
+    plane = np.array([[x, y, 0.85] for x in np.linspace(0.5, 4.5, 6)
+                      for y in np.linspace(0.4, 3.6, 5)])
     to_rad = radiance.to_rad
     for case in args.cases:
+        if case == "cie":
+            points = np.concatenate([points, plane])
+            normals = np.concatenate([normals, np.tile([0, 0, 1.0], (len(plane), 1))])
+            labels = np.concatenate([labels, ["work plane"] * len(plane)])
         extra = sources(case)
 
         def with_source(arrays, two_sided_lights=True, emitter="glow"):
@@ -101,12 +161,23 @@ def main(argv=None):
         finally:
             radiance.to_rad = to_rad
         E_ours = ours(case, points, normals)
-        for where in ("ceiling", "walls"):
+        if case == "cie":       # ours is illuminance (a luminance); Radiance's RGB to one too
+            E_rad = np.repeat((E_rad @ LUMA)[:, None], 3, axis=1)
+        for where in ("ceiling", "walls", "work plane"):
             m = labels == where
+            if not m.any():
+                continue
             a, b = E_ours[m].mean(axis=0), E_rad[m].mean(axis=0)
             print("%s %-7s ours %s  Radiance %s  ratio %s" % (
                 case, where, np.array2string(a, precision=4), np.array2string(b, precision=4),
                 np.array2string(a / b, precision=3)))
+        if case == "cie":
+            m = labels == "work plane"
+            df_o, df_r = (100 * E[m, 0] / CIE_IRRADIANCE for E in (E_ours, E_rad))
+            print("cie work plane daylight factor: ours mean %.3f %% (min %.3f), Radiance %.3f %% "
+                  "(min %.3f); per point ratio %.3f to %.3f" % (
+                      df_o.mean(), df_o.min(), df_r.mean(), df_r.min(),
+                      (df_o / df_r).min(), (df_o / df_r).max()))
         print("%s: Radiance %.1f s" % (case, seconds))
 
 
