@@ -26,6 +26,7 @@ from .contacts import find_contacts, split_at_contacts
 from .criteria import cavity_mask, face_variation, near_emitter_mask, unlit_late_nodes
 from .emitters import Emitters, exact_materials
 from .lights import DirectLight
+from .light_list import Lights, make_lights
 from .duplicates import (duplicate_warning, fill_duplicate_colours, merge_duplicates,
                          near_duplicate_warning)
 from . import memory, parallel
@@ -128,6 +129,8 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
         result = _bake(scene, settings, progress, cancel)
     result.report["peak_mb"] = peaks
     result.report["workers"] = dict(processes=shared["processes"], shared_calls=shared["calls"])
+    if "backend" in shared:
+        result.report["workers"]["backend"] = shared["backend"]
     if shared["calls"]:
         result.report["workers"]["cpu_seconds"] = round(shared["cpu_seconds"], 3)
     if shared["peak_mb"] is not None:
@@ -276,7 +279,8 @@ class _LevelMonitor(Monitor):
         super().stage((self._k + lo) / self._n, (self._k + hi) / self._n)
 
 
-def relight(result, *, reflectance=None, emission=None, progress=None, cancel=None):
+def relight(result, *, reflectance=None, emission=None, back_emission=None, lights=None,
+            progress=None, cancel=None):
     """Re-solve a bake with new material reflectance and/or emission, reusing its form factors.
 
     Nodes that become emitters but were never reached get their rows computed (only those
@@ -292,6 +296,13 @@ def relight(result, *, reflectance=None, emission=None, progress=None, cancel=No
         New per-material reflectance in [0, 1) (default: unchanged).
     emission : (M, 3) float, optional
         New per-material emitted radiance >= 0 (default: unchanged).
+    back_emission : (M, 3) float, optional
+        New radiance of the back sides, for a scene made with ``back_emission`` (one-sided
+        emitters); without it such a scene's back sides keep the bake's.
+    lights : core.light_list.Lights or sequence of dict, optional
+        New point, spot and sun lights (default: unchanged). Their direct light is kept summed
+        at every point, so it is cast again and the gathers that hold it are made again (the
+        radiosity mesh too); the form factors are kept.
     progress, cancel : callables, optional
         As in :func:`bake`.
 
@@ -305,7 +316,8 @@ def relight(result, *, reflectance=None, emission=None, progress=None, cancel=No
     scene = state.scene
     M = len(scene.reflectance)
     changes = {}
-    for name, value in (("reflectance", reflectance), ("emission", emission)):
+    for name, value in (("reflectance", reflectance), ("emission", emission),
+                        ("back_emission", back_emission)):
         if value is None:
             continue
         arr = np.array(value, dtype=np.float64)
@@ -316,22 +328,24 @@ def relight(result, *, reflectance=None, emission=None, progress=None, cancel=No
         if name == "reflectance" and (np.any(arr < 0) or np.any(arr >= 1)):
             raise ValueError(f"reflectance must lie in [0, 1); got [{arr.min():.6g}, "
                              f"{arr.max():.6g}]")
-        if name == "emission" and np.any(arr < 0):
-            raise ValueError(f"emission must be >= 0; got minimum {arr.min():.6g}")
+        if name.endswith("emission") and np.any(arr < 0):
+            raise ValueError(f"{name} must be >= 0; got minimum {arr.min():.6g}")
         arr.setflags(write=False)
         changes[name] = arr
+    if lights is not None:
+        changes["lights"] = lights if isinstance(lights, Lights) else make_lights(lights)
     new_scene = dataclasses.replace(scene, **changes)
-    if not np.any(new_scene.emission[state.patches.material] > 0) and scene.lights is None \
-            and scene.world is None:
+    if not np.any(new_scene.emission[state.patches.material] > 0) \
+            and new_scene.lights is None and scene.world is None:
         raise ValueError("emission leaves no emitting patch: nothing to light the scene")
     monitor = Monitor(progress, cancel)
     t_start = time.perf_counter()
     st = state.settings
-    if "emission" in changes and (
+    if "lights" in changes or (("emission" in changes or "back_emission" in changes) and (
             (state.direct is not None and state.direct.emitters is not None)
-            or exact_materials(new_scene, st.exact_direct, st.resolution).any()):
-        # The exact emitters' light is kept summed at every point: it is cast again, and the
-        # gathers that hold it are made again (the form factors are kept).
+            or exact_materials(new_scene, st.exact_direct, st.resolution).any())):
+        # The exact emitters' and the lights' light is kept summed at every point: it is cast
+        # again, and the gathers that hold it are made again (the form factors are kept).
         state = dataclasses.replace(state, direct=None, gather=None)
     with parallel.using(st.workers, cancel):
         if state.store is None:     # a matrix-free bake kept no form factors

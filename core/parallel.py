@@ -61,6 +61,7 @@ _HEADER = struct.Struct("<Q")
 _local = threading.local()
 _pool_lock = threading.Lock()
 _pool = [None]              # the process's Pool, or None
+_backend = [None]           # another engine's pool (set_backend), or None
 _tokens = weakref.WeakKeyDictionary()
 _next_token = itertools.count(1)
 
@@ -88,35 +89,41 @@ def using(workers, cancel=None):
 
     One bake at a time uses the process's pool: a bake in another thread meanwhile runs in its
     own process only."""
-    n = resolve(workers)
+    backend = _backend[0] if workers != 1 else None      # 1: this process only, always
+    n = resolve(workers) if backend is None else backend.size
     stats = dict(processes=1, calls=0, problem=None, peak_mb=None, cpu_seconds=0.0)
+    if backend is not None:
+        stats["backend"] = backend.name
     previous = getattr(_local, "context", None)
     owner = n > 1 and previous is None and _pool_lock.acquire(blocking=False)
     if n > 1 and previous is None and not owner:
         stats["problem"] = "another bake in this process is using the workers"
-    _local.context = _Context(n, cancel, stats) if owner else None
+    _local.context = _Context(n, cancel, stats, backend) if owner else None
     try:
         yield stats
     finally:
         _local.context = previous
         if owner:
-            pool = _pool[0]
+            pool = backend if backend is not None else _pool[0]
             if pool is not None and pool.pending:   # left uncollected (an error): unknown state
                 pool.close()
-                _pool[0] = None
+                if pool is _pool[0]:
+                    _pool[0] = None
             _pool_lock.release()
 
 
 class _Context:
     """The pool settings of one bake (held by the thread that runs it)."""
 
-    def __init__(self, n, cancel, stats):
-        self.n, self.cancel, self.stats = n, cancel, stats
+    def __init__(self, n, cancel, stats, backend=None):
+        self.n, self.cancel, self.stats, self.backend = n, cancel, stats, backend
 
     def pool(self):
         """The process's pool with ``n`` workers, started if need be; None if it cannot be."""
         if self.stats["problem"] is not None:
             return None
+        if self.backend is not None:
+            return self.backend
         pool = _pool[0]
         if pool is None or not pool.alive() or pool.size != self.n:
             if pool is not None:
@@ -191,6 +198,60 @@ def share(sc, eyes, frames, out, sky_out=None):
         return False
     job.result()
     return True
+
+
+def set_backend(backend):
+    """Share every bake's hemicube calls with ``backend`` from now on (None: this machine's
+    worker processes again); the previous backend is returned.
+
+    A backend is another engine's pool with :class:`Pool`'s interface: ``name``, ``size`` (the
+    parts a call is cut into), ``pending`` (a deque of the submitted jobs' ids, oldest first),
+    ``cpu_seconds``, ``peak_mb``, ``submit(sc, eyes, frames, parts)`` -> job, ``collect(job,
+    out, cancel, sky_out)`` (raising this module's :class:`WorkerError` on a failure and
+    :class:`core.errors.BakeCancelled` on a cancel), ``alive()`` and ``close()``. Its parts
+    run :func:`compute_part` (see ``radiosity_addon/cluster.py``: Dask distributed)."""
+    previous, _backend[0] = _backend[0], backend
+    return previous
+
+
+def part_message(sc):
+    """(geometry, scalars): what :func:`compute_part` needs of a kernel call ``sc`` besides its
+    eyes, as plain data (the sky too: its class's module has another name in Blender)."""
+    scalars = dict(n_patches=sc.n_patches, resolution=sc.r, cull_back=sc.cull_back,
+                   near=sc.near, sky=None if sc.sky is None else sc.sky.message())
+    return dict(vars(sc.geometry)), scalars
+
+
+def compute_part(geometry, scalars, eyes, frames):
+    """The rows of ``eyes`` (and their sky light, or None) from :func:`part_message`'s data,
+    with this process's peak memory (MiB) and its CPU seconds: what a worker answers."""
+    from .hemicube_chunk import Geometry, Scene, rows_in_chunks
+    from .sky import from_message
+
+    if not isinstance(geometry, Geometry):
+        data, geometry = geometry, Geometry.__new__(Geometry)
+        geometry.__dict__.update(data)
+    sc = Scene(geometry, scalars["n_patches"], scalars["resolution"], scalars["cull_back"])
+    sc.near = scalars["near"]
+    sc.sky = from_message(scalars["sky"])
+    tic = time.process_time()
+    out = np.zeros((eyes.shape[0], 2 * sc.n_patches))
+    sky_out = None if sc.sky is None else np.zeros((eyes.shape[0], 3))
+    with _unshared():
+        rows_in_chunks(sc, eyes, frames, out, None, sky_out)
+    return out, sky_out, peak_mb(), time.process_time() - tic
+
+
+@contextlib.contextmanager
+def _unshared():
+    """No sharing within: a part computes its own rows (a Dask worker may run in a process
+    that has a backend set, or inside a bake)."""
+    previous = getattr(_local, "context", None)
+    _local.context = None
+    try:
+        yield
+    finally:
+        _local.context = previous
 
 
 def close():
@@ -358,16 +419,14 @@ class Pool:
         (the parts' bounds) for :meth:`collect`."""
         token = _token(sc.geometry)
         bounds = np.linspace(0, eyes.shape[0], parts + 1).round().astype(np.int64)
-        # The sky as plain data: its class's module has another name in Blender than here.
-        scalars = dict(n_patches=sc.n_patches, resolution=sc.r, cull_back=sc.cull_back,
-                       near=sc.near, sky=None if sc.sky is None else sc.sky.message())
+        geometry, scalars = part_message(sc)
         job = (next(_next_token), bounds)
         self.pending.append(job[0])
         try:
             for k in range(parts):
                 worker = self.workers[k]
                 if token not in worker.kept:
-                    worker.send(("geometry", token, dict(vars(sc.geometry))))
+                    worker.send(("geometry", token, geometry))
                     worker.kept.append(token)
                     if len(worker.kept) > KEPT_GEOMETRIES:
                         worker.kept.popleft()
@@ -423,8 +482,7 @@ class Pool:
 
 def serve():
     """A worker's main loop: answer messages on stdin until it closes."""
-    from .hemicube_chunk import Geometry, Scene, rows_in_chunks
-    from .sky import from_message
+    from .hemicube_chunk import Geometry
 
     source = sys.stdin.buffer
     sink = os.fdopen(os.dup(sys.stdout.fileno()), "wb")
@@ -446,15 +504,8 @@ def serve():
                     kept.popitem(last=False)
                 continue
             _, token, scalars, eyes, frames = message
-            sc = Scene(kept[token], scalars["n_patches"], scalars["resolution"],
-                       scalars["cull_back"])
-            sc.near = scalars["near"]
-            sc.sky = from_message(scalars["sky"])
-            tic = time.process_time()
-            out = np.zeros((eyes.shape[0], 2 * sc.n_patches))
-            sky_out = None if sc.sky is None else np.zeros((eyes.shape[0], 3))
-            rows_in_chunks(sc, eyes, frames, out, None, sky_out)
-            _send(sink, ("rows", out, peak_mb(), time.process_time() - tic, sky_out))
+            out, sky_out, peak, cpu = compute_part(kept[token], scalars, eyes, frames)
+            _send(sink, ("rows", out, peak, cpu, sky_out))
         except Exception:                          # noqa: BLE001 - reported to the parent
             _send(sink, ("error", traceback.format_exc()))
 

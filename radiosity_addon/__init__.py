@@ -4,9 +4,9 @@ Data flows one way: Blender scene -> arrays (extract) -> core.bake -> arrays -> 
 (write). Only this package touches bpy; the core never does.
 """
 
-from . import luxview, operators, panels, props
+from . import luxview, operators, panels, props, relight_ops
 
-_MODULES = (props, operators, luxview, panels)
+_MODULES = (props, operators, relight_ops, luxview, panels)
 
 
 def register():

@@ -109,9 +109,54 @@ def build_parser(need_input):
     p.add_argument("--render-lux", metavar="FILE.png",
                    help="render the illuminance in false colour (Workbench, scene camera) with "
                         "a legend in lux to this PNG")
+    p.add_argument("--group-strength", action="append", default=[], type=_group_strength,
+                   metavar="NAME=FACTOR",
+                   help="after the bake, multiply light group NAME's light by FACTOR before "
+                        "saving (repeatable; groups: each emissive material, 'Lights' for the "
+                        "point, spot and sun lights, or Blender's light groups; the report "
+                        "lists them). A weighted sum of one solve per group: no new bake")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run the bake's hemicube calls on a Dask distributed cluster: a "
+                        "scheduler's address (tcp://host:8786), a scheduler file (.json, on "
+                        "shared storage), or 'local' for a LocalCluster of --workers processes "
+                        "(docs/farm.md); the result is the same bits")
+    p.add_argument("--scheduler-wait", type=float, default=30.0, metavar="SECONDS",
+                   help="how long --scheduler waits for its file, the connection and a first "
+                        "worker (default 30)")
     for row in OPTIONS + LUX_SETTINGS:
         add_option(p, row)
     return p
+
+
+def _group_strength(text):
+    """argparse type of --group-strength: 'NAME=FACTOR' -> (name, factor >= 0)."""
+    name, sep, value = text.rpartition("=")
+    try:
+        factor = float(value)
+    except ValueError:
+        factor = -1.0
+    if not sep or not name or not factor >= 0:
+        raise argparse.ArgumentTypeError(f"give NAME=FACTOR with FACTOR >= 0; got {text!r}")
+    return name, factor
+
+
+def _apply_groups(context, given):
+    """Set the light groups' strengths from --group-strength and write their mix."""
+    from . import relight
+
+    groups = context.scene.radiosity_groups
+    for name, _ in given:
+        if name not in groups:
+            names = ", ".join(f"'{g.name}'" for g in groups) or "none"
+            raise BatchError(f"--group-strength {name}: no light group of that name "
+                             f"(this bake's groups: {names})")
+    with relight.quiet():
+        for name, factor in given:
+            groups[name].strength = factor
+    try:
+        return relight.mix(context)
+    except relight.job.BakeError as exc:
+        raise BatchError(str(exc)) from None
 
 
 #: Blender's own options that mean we run inside the blender executable (sys.argv is Blender's).
@@ -310,11 +355,14 @@ def run(argv):
         value = getattr(args, key)
         if value is not None:
             options[key] = None if value is AUTO else value
-    try:
-        bake_input = prepare(bpy.context, options)
-        report = apply(bpy.context, bake_input, compute(bake_input))
-    except BakeError as exc:
-        raise BatchError(str(exc))
+    with _cluster(args, options):
+        try:
+            bake_input = prepare(bpy.context, options)
+            report = apply(bpy.context, bake_input, compute(bake_input))
+        except BakeError as exc:
+            raise BatchError(str(exc))
+    if args.group_strength:
+        report = _apply_groups(bpy.context, args.group_strength)
     report["input"] = src
     report["output"] = out
     _atomic_write("--in-place" if args.in_place else "--output", out_given, out,
@@ -350,6 +398,36 @@ def run(argv):
         _atomic_write("--report", args.report, report_path, dump)
         _say(f"report -> {args.report}")
     return report
+
+
+@contextlib.contextmanager
+def _cluster(args, options):
+    """With ``--scheduler``: the bake's hemicube calls on that Dask cluster (radiosity_addon/
+    cluster.py), connected before the bake (a scheduler out of reach stops the batch here)."""
+    if not args.scheduler:
+        yield
+        return
+    if args.scheduler_wait <= 0:
+        raise BatchError(f"--scheduler-wait must be > 0 seconds; got {args.scheduler_wait:g}")
+    from ..core import parallel
+    from . import cluster
+
+    local = args.scheduler == "local"
+    workers = options.get("workers") or parallel.cpu_count()
+    try:
+        client = cluster.connect(None if local else args.scheduler, workers=workers,
+                                 wait=args.scheduler_wait)
+    except cluster.ClusterError as exc:
+        raise BatchError(f"--scheduler: {exc}") from None
+    previous = cluster.use(client, parallel)
+    try:
+        yield
+    finally:
+        parallel.set_backend(previous)
+        cluster_obj = client.cluster if local else None
+        client.close()
+        if cluster_obj is not None:
+            cluster_obj.close()
 
 
 def write_lux_file(path, surfaces, as_csv):

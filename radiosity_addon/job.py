@@ -163,8 +163,11 @@ def _jsonable(value):
     return str(value)
 
 
-def apply(context, bake_input, result):
+def apply(context, bake_input, result, keep=True):
     """Write the result (main thread) and store the summary; returns the report dict.
+
+    With ``keep`` the result is kept in memory for Relight and the light groups
+    (:func:`radiosity_addon.relight.keep`); a relight writes through here with ``keep=False``.
 
     The core's radiosity mesh (``result.output``) becomes each object's baked mesh
     (``write.write_mesh``); without one ("Existing Vertices"), the colours go onto the user's own
@@ -192,6 +195,14 @@ def apply(context, bake_input, result):
     if written is not None:
         report["output_objects"] = written
     props = getattr(scene, "radiosity", None)
+    if keep and hasattr(scene, "radiosity_groups"):
+        from . import relight                     # relight writes through this module
+        try:
+            relight.keep(scene, bake_input, result)
+        except Exception as exc:  # a bug there must not fail a written bake: no relight
+            relight.drop(scene)
+            report["warnings"].append(f"Relight unavailable for this bake "
+                                      f"({type(exc).__name__}: {exc})")
     if props is not None:
         props.last_report = json.dumps(report)
         if props.show_bake:

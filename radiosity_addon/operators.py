@@ -7,6 +7,7 @@ import bpy
 from ..core.errors import BakeCancelled
 from .job import BakeError, BakeJob, apply, bake_now, options_from_props, prepare
 from .luxview import hide as hide_lux
+from .relight import drop as drop_kept
 from .write import clear_bake
 
 #: Seconds between modal timer ticks: progress refresh and the latency of Esc (the worker itself
@@ -180,6 +181,7 @@ class RADIOSITY_OT_clear(bpy.types.Operator):
         if props.selected_only:
             objs = [o for o in objs if o.select_get()]
         removed = clear_bake(objs)
+        drop_kept(context.scene)       # Relight has nothing left to relight: bake again
         props.last_report = ""
         self.report({"INFO"}, f"Radiosity cleared from {removed} mesh(es)")
         return {"FINISHED"}

@@ -10,6 +10,7 @@ import json
 
 import bpy
 
+from . import relight_ops
 from .extract import ATTRIBUTE, LUX_ATTRIBUTE
 
 #: Stage timings of the report, in the order a user reads them, with their labels (total first).
@@ -92,6 +93,7 @@ class VIEW3D_PT_radiosity(bpy.types.Panel):
             row.operator("radiosity.clear", text="Clear", icon="X")
             box.prop(context.scene.view_settings, "exposure", text="Exposure")
             draw_lux(box, context.scene)
+            relight_ops.draw(box, context.scene)
         else:
             box.label(text="No bake in this scene yet")
 

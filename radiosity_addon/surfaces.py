@@ -95,14 +95,26 @@ def measure(result, surfaces, cancel=None):
     for surf in surfaces:
         if cancel is not None and cancel():
             raise BakeCancelled("cancelled while measuring calculation surfaces")
-        pts, nrm, w = corelux.calculation_grid(surf.polygons)
-        both = corelux.illuminance_at(result, np.concatenate([pts, surf.vertex_points]),
-                                      np.concatenate([nrm, surf.vertex_normals]))
-        surf.grid, surf.grid_normals, surf.weights = pts, nrm, w
-        surf.grid_lux, surf.vertex_lux = both[:pts.shape[0]], both[pts.shape[0]:]
-        surf.outdoor = outdoor
-        surf.summary = dict(object=surf.object_name, cell_area=float(w[0]),
-                            **corelux.summary(surf.grid_lux, w, outdoor=outdoor))
+        fill(surf, incident(result, surf), outdoor)
+
+
+def incident(result, surf):
+    """(S, 3) light arriving (irradiance / pi) at the surface's grid points, then vertices."""
+    pts, nrm, _ = corelux.calculation_grid(surf.polygons)
+    return corelux.incident_at(result, np.concatenate([pts, surf.vertex_points]),
+                               np.concatenate([nrm, surf.vertex_normals]))
+
+
+def fill(surf, arriving, outdoor):
+    """Set the surface's grid, lux and summary from :func:`incident`'s (S, 3) (linear in the
+    light: the relight's light groups mix it)."""
+    pts, nrm, w = corelux.calculation_grid(surf.polygons)
+    both = corelux.lux(arriving)
+    surf.grid, surf.grid_normals, surf.weights = pts, nrm, w
+    surf.grid_lux, surf.vertex_lux = both[:pts.shape[0]], both[pts.shape[0]:]
+    surf.outdoor = outdoor
+    surf.summary = dict(object=surf.object_name, cell_area=float(w[0]),
+                        **corelux.summary(surf.grid_lux, w, outdoor=outdoor))
 
 
 def write(objects, surfaces):

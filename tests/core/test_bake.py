@@ -87,7 +87,8 @@ def test_two_sided_panel_lights_ceiling_from_its_back():
     # (Howell). Tolerance 4 %: hemicube proximity error of 0.25 m patches at 1 m (~2 %) and
     # R = 32 aliasing.
     scene = _panel_under_ceiling(n=4)
-    # output_mode='vertices': every front node solved (late rows); the mesh output skips unlit faces.
+    # output_mode='vertices': every front node solved (late rows); the mesh output skips unlit
+    # faces.
     two = bake(scene, _settings(patch_size=1.0, rotate_hemicube=False, output_mode="vertices"))
     one = bake(scene, _settings(patch_size=1.0, rotate_hemicube=False, two_sided=False,
                                 output_mode="vertices"))
@@ -235,7 +236,8 @@ def test_relight_equals_fresh_bake(small_room, monkeypatch):
     # Receiver elements are placed where the first bake's light changes, and a relight keeps
     # them (tests/core/test_elements.py): a fresh bake under other lights may place them
     # elsewhere. Without elements a relight must equal a fresh bake exactly.
-    # output_mode='vertices': the mesh output also keeps its mesh (placed by the first bake's light).
+    # output_mode='vertices': the mesh output also keeps its mesh (placed by the first bake's
+    # light).
     base = bake(small_room, _settings(patch_size=1.0, solver="direct", element_levels=0,
                                       output_mode="vertices"))
     original = base.node_radiance.copy()
@@ -285,6 +287,27 @@ def test_relight_new_emitter_computes_only_new_rows():
     np.testing.assert_allclose(re.node_radiance, fresh.node_radiance, rtol=1e-12)
 
 
+def test_relight_back_emission_equals_fresh_bake(small_room):
+    # A scene with one-sided emitters carries back_emission (the add-on's area lights): a
+    # relight that changes it must equal a fresh bake of the scene with that back emission.
+    polys = [small_room.corner_verts[s:s + k] for s, k in zip(small_room.face_starts,
+                                                              small_room.face_sizes)]
+    s = _settings(patch_size=1.0, solver="direct", element_levels=0, output_mode="vertices")
+
+    def scene(emission, back):
+        return scene_from_polygons(small_room.vertices, polys, small_room.face_materials,
+                                   small_room.reflectance, emission, back_emission=back)
+    em = np.asarray(small_room.emission)
+    base = bake(scene(em, em), s)
+    em2, back2 = em * [2.0, 1.0, 0.5], em * [0.5, 1.0, 3.0]
+    re = relight(base, emission=em2, back_emission=back2)
+    fresh = bake(scene(em2, back2), s)
+    np.testing.assert_allclose(re.corner_colours, fresh.corner_colours, rtol=1e-10, atol=1e-12)
+    kept = relight(base, emission=em2)        # without it, the bake's back emission stays
+    np.testing.assert_allclose(kept.corner_colours,
+                               bake(scene(em2, em), s).corner_colours, rtol=1e-10, atol=1e-12)
+
+
 def test_relight_validation(small_room_direct):
     with pytest.raises(ValueError,
                        match=r"reflectance must have shape \(M, 3\) = \(5, 3\); got \(4, 3\)"):
@@ -293,6 +316,10 @@ def test_relight_validation(small_room_direct):
         relight(small_room_direct, reflectance=np.ones((5, 3)))
     with pytest.raises(ValueError, match="emission must be >= 0"):
         relight(small_room_direct, emission=-np.ones((5, 3)))
+    with pytest.raises(ValueError, match="back_emission must be >= 0"):
+        relight(small_room_direct, back_emission=-np.ones((5, 3)))
+    with pytest.raises(ValueError, match=r"back_emission must have shape \(M, 3\)"):
+        relight(small_room_direct, back_emission=np.ones((2, 3)))
     with pytest.raises(ValueError, match="no emitting patch"):
         relight(small_room_direct, emission=np.zeros((5, 3)))
     with pytest.raises(TypeError, match="result must be a BakeResult"):

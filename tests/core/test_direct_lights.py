@@ -206,6 +206,23 @@ def test_relight_keeps_the_lights():
     assert np.all(brighter.corner_colours.mean(axis=0) > result.corner_colours.mean(axis=0))
 
 
+def test_relight_with_new_lights_equals_a_fresh_bake():
+    # New lights (one moved and recoloured, one doubled) are cast again on the kept form
+    # factors; oracle: a fresh bake of the scene with those lights. Receiver elements off: a
+    # fresh bake places them where its own light changes.
+    s = BakeSettings(output_mode="vertices", element_levels=0)
+    first = [dict(POINT, position=(1.0, 1.0, 2.0)), dict(SPOT, position=(2.0, 2.0, 2.2))]
+    new = [dict(POINT, position=(1.0, 1.0, 2.0), power=200.0),
+           dict(SPOT, position=(1.5, 2.5, 2.0), color=(1.0, 0.5, 0.2))]
+    result = bake(_closed_box(3.0, 3.0, 2.5, first), s)
+    again = relight(result, lights=new)
+    fresh = bake(_closed_box(3.0, 3.0, 2.5, new), s)
+    assert again.report["lights"]["names"] == ["Bulb", "Spot"]
+    np.testing.assert_allclose(again.corner_colours, fresh.corner_colours, rtol=1e-9)
+    np.testing.assert_allclose(again.corner_incident, fresh.corner_incident, rtol=1e-9)
+    assert not np.allclose(again.corner_colours, result.corner_colours)
+
+
 def test_lights_only_scene_is_accepted_and_no_light_is_refused():
     scene = _floor(lights=[POINT])
     assert scene.lights.names == ("Bulb",)

@@ -1,0 +1,564 @@
+"""Relight and light groups: new light on the last bake's form factors, no new form factors.
+
+After a bake, :func:`keep` holds the core's ``BakeResult`` (its form factors, gather rows and
+radiosity mesh) and the extraction that says where its colours go, in this module (``_KEPT``,
+keyed by the scene's ``session_uid``): in memory, for this Blender session only. Nothing is
+saved with the .blend (the office sample keeps 458 MB, mostly the radiosity mesh's gather rows);
+after reopening a file, or Clear Bake, there is nothing to relight: :func:`relight` says to bake
+again.
+
+* **Relight** (:func:`relight`): reads the scene again; if anything but the emissive materials'
+  strength and colour and the point, spot and sun lights changed, it stops (bake again). New
+  emission goes through ``core.relight`` (a new solve on the kept form factors). The lights'
+  direct light is kept summed in the bake: lights scaled alike (one factor per colour channel)
+  add the lights' own solution (``core.relight`` with no emission) times the factor - 1, no
+  shadow ray; lights changed apart, moved, added or removed are cast again
+  (``core.relight(lights=)``: shadow rays and gathers again, the form factors kept).
+* **Light groups** (:func:`mix`): the solve is linear in the light, so one solution per group
+  (each emissive material, and the lights with the world) is kept, and a group's strength and
+  tint make the written colours a weighted sum with no solve. Blender's light groups
+  (``Object.lightgroup``) merge what they hold into one group.
+
+The colours are written by ``job.apply``, exactly as a bake writes them.
+"""
+
+import json
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field, replace
+
+import bpy
+import numpy as np
+
+from .. import core
+from ..core.errors import RadiosityError
+from . import job, surfaces
+from .extract import ATTRIBUTE, extract
+
+#: Two values of a re-read scene are "unchanged" within this relative difference (float32 at the
+#: Blender boundary; the lights' factor is one per colour channel for all of them).
+SAME_RTOL = 1e-5
+
+#: Group name of the point, spot and sun lights (with the world, if any) outside a light group.
+LIGHTS = "Lights"
+
+#: What the user is told whenever the kept bake cannot serve.
+BAKE_AGAIN = "bake again"
+
+_KEPT = {}
+_TOO_BIG = {}     # session uid -> (MB the last bake would have kept, the memory budget in MB)
+
+
+class RelightError(job.BakeError):
+    """Relight cannot run; the message is for the user."""
+
+
+@dataclass
+class Solution:
+    """Light of one bake, linear in the emission: the arrays job.apply writes.
+
+    corner, incident : (C, 3) float64 (incident may be None); mesh_corner, mesh_incident :
+    (C_out, 3) float64 or None (radiosity mesh output); surfaces : one (S, 3) float64 per
+    calculation surface (``surfaces.incident``: its grid points, then its vertices).
+    """
+
+    corner: np.ndarray
+    incident: np.ndarray = None
+    mesh_corner: np.ndarray = None
+    mesh_incident: np.ndarray = None
+    surfaces: tuple = ()
+
+    @classmethod
+    def of(cls, result, calc_surfaces=()):
+        out = result.output
+        return cls(result.corner_colours, result.corner_incident,
+                   None if out is None else out.corner_colours,
+                   None if out is None else out.corner_incident,
+                   tuple(surfaces.incident(result, surf) for surf in calc_surfaces))
+
+    def combine(self, other, weight=1.0, own=1.0):
+        """``own * self + weight * other``; weights scalar or (3,)."""
+        def mix(a, b):
+            if a is None or b is None:
+                return None
+            return own * a + weight * b
+        return Solution(mix(self.corner, other.corner), mix(self.incident, other.incident),
+                        mix(self.mesh_corner, other.mesh_corner),
+                        mix(self.mesh_incident, other.mesh_incident),
+                        tuple(mix(a, b) for a, b in zip(self.surfaces, other.surfaces)))
+
+    def scaled(self, weight):
+        return self.combine(self, weight, own=0.0)
+
+    def as_result(self, template):
+        """A BakeResult like ``template`` (report, mesh) with these colours."""
+        output = template.output
+        if output is not None:
+            output = replace(output, corner_colours=self.mesh_corner,
+                             corner_incident=self.mesh_incident)
+        return replace(template, corner_colours=self.corner, corner_incident=self.incident,
+                       output=output)
+
+
+@dataclass
+class Kept:
+    """What relight needs from the last bake of a scene (see the module docstring)."""
+
+    bake_input: object           # job.BakeInput of the bake (extraction: where colours go)
+    result: object               # core.BakeResult of the bake: the kept form factors
+    selected_only: bool
+    units: list                  # [(group name, material indices or None for the lights)]
+    emission: np.ndarray         # (M, 3) the emission of the written light
+    back_emission: np.ndarray    # (M, 3) or None
+    lights_ref: object = None    # core Lights that ``result`` was lit by (the bake's, or relit)
+    lights_factor: np.ndarray = field(default_factory=lambda: np.ones(3))
+    template: object = None      # the last relit core.BakeResult (report, mesh)
+    lights: Solution = None      # the lights' (and world's) own solution, at the bake's power
+    basis: dict = None           # unit index -> Solution at ``emission``, ``lights_factor``
+    seconds: dict = field(default_factory=dict)
+    kept_mb: float = 0.0         # kept_bytes at keep time (the panel shows it)
+
+
+def kept(scene):
+    """The scene's kept bake, or None."""
+    return _KEPT.get(scene.session_uid)
+
+
+def keep(scene, bake_input, result):
+    """Keep a bake for relight and list its light groups on the scene (after job.apply)."""
+    arrays = bake_input.scene
+    units = _units(bake_input)
+    _KEPT[scene.session_uid] = Kept(
+        bake_input, result, bool(scene.radiosity.selected_only), units,
+        np.array(arrays.emission), None if arrays.back_emission is None
+        else np.array(arrays.back_emission), lights_ref=arrays.lights, template=result)
+    _set_groups(scene, [name for name, _ in units])
+    entry = _KEPT[scene.session_uid]
+    size = kept_bytes(entry)
+    entry.kept_mb = size / 2 ** 20
+    budget = kept_budget(bake_input)
+    _TOO_BIG.pop(scene.session_uid, None)
+    if size > budget:
+        # Kept rows grow with the scene (the office: 458 MB); above the bake's own memory
+        # budget they are not kept, and Relight says why.
+        drop(scene)
+        _TOO_BIG[scene.session_uid] = (size / 2 ** 20, budget / 2 ** 20)
+
+
+def kept_budget(bake_input):
+    """Bytes a bake may keep for relight: the bake's own memory budget (1 GiB by default)."""
+    return bake_input.settings.memory_budget
+
+
+def drop(scene=None):
+    """Forget the kept bake of ``scene`` (every scene's without one) and its group list."""
+    if scene is None:
+        _KEPT.clear()
+        return
+    _KEPT.pop(scene.session_uid, None)
+    if hasattr(scene, "radiosity_groups"):
+        _set_groups(scene, [])
+
+
+def kept_bytes(entry):
+    """Bytes of the NumPy arrays a kept bake holds (form factors, gather rows, meshes, bases)."""
+    seen, buffers, total, stack = set(), set(), 0, [entry]
+    while stack:
+        obj = stack.pop()
+        if id(obj) in seen or obj is None or isinstance(obj, (str, bytes, int, float, bool)):
+            continue
+        seen.add(id(obj))
+        if isinstance(obj, np.ndarray):      # a view counts its base's memory, once
+            while isinstance(obj.base, np.ndarray):
+                obj = obj.base
+            if obj.base is None and id(obj) not in buffers:
+                buffers.add(id(obj))
+                total += obj.nbytes
+            continue
+        if isinstance(obj, dict):
+            stack.extend(obj.values())
+        elif isinstance(obj, (list, tuple, set)):
+            stack.extend(obj)
+        elif isinstance(obj, bpy.types.bpy_struct):   # Blender's own data: not ours
+            continue
+        elif hasattr(obj, "__dict__"):
+            stack.extend(vars(obj).values())
+        elif hasattr(obj, "__slots__"):
+            stack.extend(getattr(obj, s, None) for s in obj.__slots__)
+    return total
+
+
+# ----------------------------------------------------------------------------- groups
+
+
+def _units(bake_input, lights=False):
+    """[(group name, materials)]: every emissive material, then the lights and world (None).
+
+    An emissive material whose objects all sit in one Blender light group, and lights that all
+    sit in one, take that group's name; units of one name form one group. ``lights``: the
+    point, spot and sun lights now (default: the bake's)."""
+    scene, arrays = bake_input.scene, bake_input.extraction.arrays
+    if lights is not False:
+        scene = replace(scene, lights=lights)
+    mats = np.asarray(scene.face_materials)
+    emits = np.any(np.asarray(scene.emission) > 0, axis=1)
+    if scene.back_emission is not None:
+        emits |= np.any(np.asarray(scene.back_emission) > 0, axis=1)
+    names = arrays.get("material_names") or ()
+    objects = np.asarray(arrays.get("face_objects", np.zeros(mats.size, np.int64)))
+    object_names = arrays.get("object_names") or ()
+    units = []
+    for m in np.flatnonzero(emits):
+        on = mats == m
+        if not on.any():
+            continue
+        owners = {object_names[i] for i in np.unique(objects[on]) if i < len(object_names)}
+        name = names[m] if m < len(names) else f"Material {m}"
+        units.append((_lightgroup(owners) or name, np.array([m])))
+    lights = scene.lights
+    if (lights is not None and lights.shines) or scene.world is not None:
+        owners = set(lights.names) if lights is not None and lights.shines else set()
+        group = _lightgroup(owners) if owners and scene.world is None else ""
+        units.append((group or (LIGHTS if scene.world is None else "Lights and World"), None))
+    return units
+
+
+def _lightgroup(object_names):
+    """The Blender light group that all these objects share, or ''."""
+    groups = {getattr(bpy.data.objects.get(n), "lightgroup", "") or "" for n in object_names}
+    return groups.pop() if len(groups) == 1 else ""
+
+
+def group_names(entry):
+    """Group names in order, each once."""
+    return list(dict.fromkeys(name for name, _ in entry.units))
+
+
+_QUIET = [False]
+
+
+@contextmanager
+def quiet():
+    """Group properties set inside write nothing (filling, resetting or scripting the list)."""
+    was, _QUIET[0] = _QUIET[0], True
+    try:
+        yield
+    finally:
+        _QUIET[0] = was
+
+
+def is_quiet():
+    return _QUIET[0]
+
+
+def _set_groups(scene, names, keep_values=False):
+    """Make the scene's group list ``names`` (strength and tint 1, or as they were). An empty
+    list leaves no trace in the scene's data (Clear Bake restores it exactly): the stored
+    property is removed."""
+    if not names and not keep_values:
+        groups = scene.radiosity_groups
+        if len(groups):
+            with quiet():
+                groups.clear()
+        if "radiosity_groups" in scene.keys():       # Blender 4.x keeps it as an ID property
+            del scene["radiosity_groups"]
+        return
+    with quiet():
+        groups = scene.radiosity_groups
+        was = {g.name: (g.strength, tuple(g.tint)) for g in groups} if keep_values else {}
+        groups.clear()
+        for name in dict.fromkeys(names):
+            item = groups.add()
+            item.name = name
+            if name in was:
+                item.strength, item.tint = was[name]
+
+
+def _weights(scene, entry):
+    """(3,) weight per group name: strength x tint."""
+    out = {name: np.ones(3) for name in group_names(entry)}
+    for item in scene.radiosity_groups:
+        if item.name in out:
+            out[item.name] = item.strength * np.array(item.tint[:3], dtype=np.float64)
+    return out
+
+
+def _all_one(weights):
+    return all(np.array_equal(w, np.ones(3)) for w in weights.values())
+
+
+# ----------------------------------------------------------------------------- solving
+
+
+def _relit(entry, emission, back_emission, lights=None):
+    """core.relight of the kept bake with this emission (and these lights: cast again)."""
+    kw = dict(emission=emission)
+    if back_emission is not None:
+        kw["back_emission"] = back_emission
+    if lights is not None:
+        kw["lights"] = lights
+    try:
+        return core.relight(entry.result, **kw)
+    except (RadiosityError, ValueError) as exc:
+        raise RelightError(f"Relight failed: {exc}") from exc
+
+
+def _lights_solution(entry):
+    """The lights' (and world's) own solution at the bake's power (computed once)."""
+    if entry.lights is None:
+        M = entry.emission.shape[0]
+        t0 = time.perf_counter()
+        zero = None if entry.back_emission is None else np.zeros((M, 3))
+        entry.lights = Solution.of(_relit(entry, np.zeros((M, 3)), zero), _surfaces(entry))
+        entry.seconds["lights_solution"] = time.perf_counter() - t0
+    return entry.lights
+
+
+def _surfaces(entry):
+    return entry.bake_input.extraction.surfaces
+
+
+def _has_lights(entry):
+    return any(mats is None for _, mats in entry.units)
+
+
+def _basis(entry):
+    """One Solution per unit at the current emission and lights factor (computed once each)."""
+    if entry.basis is not None:
+        return entry.basis
+    t0 = time.perf_counter()
+    basis = {}
+    lights = _lights_solution(entry) if _has_lights(entry) else None
+    for k, (_, mats) in enumerate(entry.units):
+        if mats is None:
+            basis[k] = lights.scaled(entry.lights_factor)
+            continue
+        only = np.zeros_like(entry.emission)
+        only[mats] = entry.emission[mats]
+        back = None
+        if entry.back_emission is not None:
+            back = np.zeros_like(entry.back_emission)
+            back[mats] = entry.back_emission[mats]
+        if not only.any() and (back is None or not back.any()):
+            basis[k] = None                    # dark at the current emission
+            continue
+        relit = _relit(entry, only, back)
+        _same_mesh(entry, relit)
+        sol = Solution.of(relit, _surfaces(entry))
+        basis[k] = sol if lights is None else sol.combine(lights, -1.0)
+    entry.basis = basis
+    entry.seconds["groups"] = time.perf_counter() - t0
+    return basis
+
+
+def _same_mesh(entry, relit):
+    """Group solutions add up only on one radiosity mesh."""
+    a, b = entry.template.output, relit.output
+    if a is None and b is None:
+        return
+    if a is None or b is None or a.corner_verts.shape != b.corner_verts.shape \
+            or not np.array_equal(a.vertices, b.vertices):
+        raise RelightError("Light groups: a group alone re-meshed the radiosity mesh (a new "
+                           "emitter, or exact emitters); set its strength back and bake again")
+
+
+def _mixed(entry, weights):
+    """The written Solution: the groups' solutions weighted."""
+    total = None
+    for k, sol in _basis(entry).items():
+        if sol is None:
+            continue
+        w = weights[entry.units[k][0]]
+        total = sol.scaled(w) if total is None else total.combine(sol, w)
+    if total is None:
+        raise RelightError(f"Light groups: nothing in the scene gives light; {BAKE_AGAIN}")
+    return total
+
+
+# ----------------------------------------------------------------------------- the scene
+
+
+def _read(context, entry):
+    """Re-read the scene: (emission (M, 3), back emission (M, 3) or None, the lights (core
+    Lights or None), their factor from the kept ones (:func:`_lights_factor`: (3,) or None));
+    RelightError if anything else changed."""
+    try:
+        ext = extract(context.evaluated_depsgraph_get(), selected_only=entry.selected_only)
+    except RadiosityError as exc:
+        raise RelightError(str(exc)) from exc
+    old = entry.bake_input.extraction.arrays
+    new = ext.arrays
+    if [p.object_name for p in ext.parts] != [p.object_name for p in
+                                               entry.bake_input.extraction.parts]:
+        raise RelightError(f"Relight: the baked objects changed; {BAKE_AGAIN}")
+    for key in sorted(set(old) | set(new)):
+        if key in ("emission", "back_emission", "lights"):
+            continue
+        if not _same(old.get(key), new.get(key)):
+            what = {"vertices": "geometry", "corner_verts": "geometry",
+                    "face_starts": "geometry", "face_sizes": "geometry",
+                    "reflectance": "material colours", "back_reflectance": "material colours",
+                    "face_materials": "material assignment"}.get(key, key.replace("_", " "))
+            raise RelightError(f"Relight: the {what} changed since the bake "
+                               f"(Relight takes new lights and emission strength and colour "
+                               f"only); {BAKE_AGAIN}")
+    emission = np.asarray(new["emission"], dtype=np.float64)
+    back = new.get("back_emission")
+    if (back is None) != (old.get("back_emission") is None):
+        raise RelightError(f"Relight: the one-sided emitters changed; {BAKE_AGAIN}")
+    newly = np.any(emission > 0, axis=1) & ~np.any(np.asarray(old["emission"]) > 0, axis=1)
+    if newly.any():
+        names = new.get("material_names") or ()
+        which = ", ".join(f"'{names[m]}'" for m in np.flatnonzero(newly)[:3] if m < len(names))
+        raise RelightError(f"Relight: material {which} emits now and did not at the bake "
+                           f"(its light needs its own patches and form factors); {BAKE_AGAIN}")
+    lights = new.get("lights")
+    return emission, None if back is None else np.asarray(back, np.float64), lights, \
+        _lights_factor(entry.lights_ref, lights)
+
+
+def _same(a, b):
+    if a is None or b is None:
+        return a is None and b is None
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        a, b = np.asarray(a), np.asarray(b)
+        if a.shape != b.shape:
+            return False
+        if a.dtype.kind in "fc":
+            return bool(np.allclose(a, b, rtol=SAME_RTOL, atol=SAME_RTOL * 1e-3))
+        return bool(np.array_equal(a, b))
+    if hasattr(a, "__dataclass_fields__"):
+        return type(a) is type(b) and all(_same(getattr(a, f), getattr(b, f))
+                                           for f in a.__dataclass_fields__)
+    if isinstance(a, (list, tuple)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    if hasattr(a, "__dict__") and not isinstance(a, type):
+        return type(a) is type(b) and _same(sorted(vars(a).items()), sorted(vars(b).items()))
+    return a == b
+
+
+def _lights_factor(old, new):
+    """(3,) factor per colour channel from the lights ``old`` to ``new`` when they differ by
+    one common factor per channel (power and colour scaled alike), else None (cast again)."""
+    if old is None or not len(old):
+        return np.ones(3) if new is None or not len(new) else None
+    if new is None or not len(new):
+        return np.zeros(3)                    # every light deleted: the old ones at 0
+    if len(old) != len(new) or list(old.names) != list(new.names):
+        return None
+    for f in old.__dataclass_fields__:
+        if f not in ("intensity", "sun_irradiance") and not _same(getattr(old, f),
+                                                                  getattr(new, f)):
+            return None
+    a = np.concatenate([old.intensity, old.sun_irradiance]).reshape(-1, 3)
+    b = np.concatenate([new.intensity, new.sun_irradiance]).reshape(-1, 3)
+    factor = np.ones(3)
+    for c in range(3):
+        on = a[:, c] > 0
+        if np.any(b[~on, c] > 0):
+            return None
+        if on.any():
+            ratio = b[on, c] / a[on, c]
+            if not np.allclose(ratio, ratio[0], rtol=SAME_RTOL):
+                return None
+            factor[c] = ratio[0]
+    return factor
+
+
+def _write(context, entry, solution, seconds):
+    """Write ``solution`` as a bake writes (job.apply); returns the report."""
+    result = solution.as_result(entry.template)
+    outdoor = entry.template.report.get("sky", {}).get("outdoor_lux")
+    for surf, arriving in zip(_surfaces(entry), solution.surfaces):
+        surfaces.fill(surf, arriving, outdoor)
+    report = job.apply(context, entry.bake_input, result, keep=False)
+    report["relight"] = dict(seconds=round(seconds, 4), groups=group_names(entry),
+                             kept_mb=round(kept_bytes(entry) / 2 ** 20, 2))
+    context.scene.radiosity.last_report = json.dumps(report, default=str)
+    return report
+
+
+def relight(context):
+    """Relight the scene's kept bake with the scene's current light (main thread).
+
+    Returns the report dict; raises RelightError (nothing written) when there is no kept bake or
+    the scene changed otherwise."""
+    scene = context.scene
+    entry = kept(scene)
+    if entry is None:
+        big = _TOO_BIG.get(scene.session_uid)
+        if big is not None:
+            raise RelightError(f"Relight: the last bake was not kept in memory (it needs "
+                               f"{big[0]:.0f} MB, above the Memory Budget of {big[1]:.0f} MB); "
+                               f"{BAKE_AGAIN}")
+        raise RelightError(f"Relight: no bake is kept in memory for this scene (bakes are not "
+                           f"kept in the saved file); {BAKE_AGAIN}")
+    if context.mode != "OBJECT":
+        raise RelightError("Switch to Object Mode to relight")
+    _check_baked(scene, entry)
+    t0 = time.perf_counter()
+    emission, back, lights, factor = _read(context, entry)
+    weights = _weights(scene, entry)
+    before = dict(vars(entry))
+    try:
+        if factor is None:         # lights moved, added or changed apart: cast them again
+            relit = _relit(entry, emission, back, lights)
+            entry.result = entry.template = relit
+            entry.lights_ref, entry.lights, factor = lights, None, np.ones(3)
+            solution = Solution.of(relit, _surfaces(entry))
+            entry.units = _units(entry.bake_input, lights)
+        elif _all_one(weights):    # one solve: the scene's light as it is now
+            relit = _relit(entry, emission, back)
+            scaled = not np.array_equal(factor, np.ones(3))
+            _same_mesh_or_new(entry, relit, scaled)
+            solution = Solution.of(relit, _surfaces(entry))
+            if scaled:
+                solution = solution.combine(_lights_solution(entry), factor - 1.0)
+            entry.template = relit
+        entry.emission, entry.back_emission, entry.lights_factor = emission, back, factor
+        entry.basis = None
+        if not _all_one(weights):  # the groups' solutions at the new light, mixed
+            solution = _mixed(entry, weights)
+        report = _write(context, entry, solution, time.perf_counter() - t0)
+    except BaseException:          # nothing was written: the kept bake stays as it was
+        vars(entry).update(before)
+        raise
+    if group_names(entry) != [g.name for g in scene.radiosity_groups]:
+        _set_groups(scene, group_names(entry), keep_values=True)
+    return report
+
+
+def _check_baked(scene, entry):
+    """The kept bake's objects still show it (not undone, not cleared by hand)."""
+    for part in entry.bake_input.extraction.parts:
+        obj = scene.objects.get(part.object_name)
+        if obj is None or obj.type != "MESH":
+            raise RelightError(f"Relight: object '{part.object_name}' of the bake is gone; "
+                               f"{BAKE_AGAIN}")
+        if ATTRIBUTE not in obj.data.color_attributes:
+            raise RelightError(f"Relight: object '{obj.name}' no longer shows the bake (undone "
+                               f"or cleared); {BAKE_AGAIN}")
+
+
+def _same_mesh_or_new(entry, relit, scaled):
+    """A relight that re-meshed (exact emitters gather again) writes its own mesh from now on;
+    the lights' solution on the old mesh no longer adds to it."""
+    if relit.output is None:
+        return
+    try:
+        _same_mesh(entry, relit)
+    except RelightError:
+        if scaled:
+            raise RelightError("Relight: the emitters were meshed again (exact emitters), so "
+                               f"the lights' power cannot be scaled with them; {BAKE_AGAIN}")
+        entry.lights = None
+
+
+def mix(context):
+    """Write the light groups' weighted sum (no solve once the groups' solutions are kept)."""
+    entry = kept(context.scene)
+    if entry is None:
+        raise RelightError(f"Light groups: no bake is kept in memory; {BAKE_AGAIN}")
+    t0 = time.perf_counter()
+    solution = _mixed(entry, _weights(context.scene, entry))
+    return _write(context, entry, solution, time.perf_counter() - t0)

@@ -1,0 +1,156 @@
+"""Relight in the panel: the Relight operator, the light groups' properties and their list.
+
+The work is in :mod:`radiosity_addon.relight`; this module is what the user touches. Each group
+(``Scene.radiosity_groups``) has a strength and a tint; changing either writes the groups'
+weighted sum at once (no solve once the groups' solutions are kept).
+"""
+
+import traceback
+
+import bpy
+from bpy.app.handlers import persistent
+
+from . import job, relight
+
+#: The last light-group error per scene (an update callback cannot report): the panel shows it.
+_ERRORS = {}
+
+
+def _group_changed(self, context):
+    from .operators import RADIOSITY_OT_bake
+
+    if relight.is_quiet() or context is None or context.scene is None \
+            or RADIOSITY_OT_bake.running():     # the bake's result will replace the groups
+        return
+    scene = context.scene
+    _ERRORS.pop(scene.session_uid, None)
+    if relight.kept(scene) is None:
+        return
+    try:
+        relight.mix(context)
+    except job.BakeError as exc:
+        _ERRORS[scene.session_uid] = str(exc)
+    except Exception as exc:  # a bug: keep the traceback in the console, the UI alive
+        traceback.print_exc()
+        _ERRORS[scene.session_uid] = f"Light groups failed ({type(exc).__name__}): {exc}"
+
+
+class RADIOSITY_PG_group(bpy.types.PropertyGroup):
+    """A light group of the last bake: its strength and tint multiply its light."""
+
+    strength: bpy.props.FloatProperty(
+        name="Strength", description="Multiplies this group's light (1: as baked or relit)",
+        default=1.0, min=0.0, soft_max=10.0, update=_group_changed)
+    tint: bpy.props.FloatVectorProperty(
+        name="Tint", description="Multiplies this group's light per colour channel",
+        subtype="COLOR", size=3, default=(1.0, 1.0, 1.0), min=0.0, soft_max=1.0,
+        update=_group_changed)
+
+
+class RADIOSITY_OT_relight(bpy.types.Operator):
+    """Solve again with the lights' and emissive materials' current strength and colour, on the
+    last bake's form factors (geometry and materials must be unchanged)"""
+
+    bl_idname = "radiosity.relight"
+    bl_label = "Relight"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        from .operators import RADIOSITY_OT_bake
+
+        return context.scene is not None and not RADIOSITY_OT_bake.running()
+
+    def execute(self, context):
+        try:
+            report = relight.relight(context)
+        except job.BakeError as exc:           # RelightError, or writing failed
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        except Exception as exc:  # a bug, not a user error: keep the traceback in the console
+            traceback.print_exc()
+            self.report({"ERROR"}, f"Relight failed ({type(exc).__name__}): {exc}")
+            return {"CANCELLED"}
+        _ERRORS.pop(context.scene.session_uid, None)
+        for warning in report.get("warnings", []):
+            self.report({"WARNING"}, warning)
+        self.report({"INFO"}, f"Relit in {report['relight']['seconds']:.2f} s")
+        return {"FINISHED"}
+
+
+class RADIOSITY_OT_groups_reset(bpy.types.Operator):
+    """Set every light group's strength and tint back to 1"""
+
+    bl_idname = "radiosity.groups_reset"
+    bl_label = "Reset Groups"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        with relight.quiet():
+            for item in context.scene.radiosity_groups:
+                item.strength, item.tint = 1.0, (1.0, 1.0, 1.0)
+        _group_changed(None, context)
+        return {"FINISHED"}
+
+
+class RADIOSITY_OT_relight_forget(bpy.types.Operator):
+    """Free the memory the last bake keeps for Relight and the light groups (bake again to
+    relight)"""
+
+    bl_idname = "radiosity.relight_forget"
+    bl_label = "Forget Kept Bake"
+    bl_options = {"REGISTER"}
+
+    def execute(self, context):
+        relight.drop(context.scene)
+        return {"FINISHED"}
+
+
+def draw(layout, scene):
+    """The Relight button, and the light groups of the kept bake (in the panel's result box)."""
+    entry = relight.kept(scene)
+    row = layout.row(align=True)
+    row.operator("radiosity.relight", icon="LIGHT")
+    if entry is None:
+        return
+    row.operator("radiosity.relight_forget", text=f"{entry.kept_mb:.0f} MB", icon="X")
+    groups = scene.radiosity_groups
+    if len(groups):
+        col = layout.column(align=True)
+        header = col.row(align=True)
+        header.label(text="Light Groups")
+        header.operator("radiosity.groups_reset", text="", icon="LOOP_BACK")
+        for item in groups:
+            row = col.row(align=True)
+            row.prop(item, "strength", text=item.name)
+            row.prop(item, "tint", text="")
+    error = _ERRORS.get(scene.session_uid)
+    if error:
+        layout.label(text=error, icon="ERROR")
+
+
+@persistent
+def _forget(*_args):
+    """A file is loaded: no kept bake belongs to it."""
+    relight.drop()
+    _ERRORS.clear()
+
+
+CLASSES = (RADIOSITY_PG_group, RADIOSITY_OT_relight, RADIOSITY_OT_groups_reset,
+           RADIOSITY_OT_relight_forget)
+
+
+def register():
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+    bpy.types.Scene.radiosity_groups = bpy.props.CollectionProperty(type=RADIOSITY_PG_group)
+    bpy.app.handlers.load_pre.append(_forget)
+
+
+def unregister():
+    if _forget in bpy.app.handlers.load_pre:
+        bpy.app.handlers.load_pre.remove(_forget)
+    relight.drop()
+    del bpy.types.Scene.radiosity_groups
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

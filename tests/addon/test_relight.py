@@ -1,0 +1,369 @@
+"""Relight and light groups in the panel (radiosity_addon.relight, relight_ops).
+
+Oracle: a fresh bake of the scene with the new light. The solve is linear in the light, so a
+relight on the kept form factors, or a weighted sum of the groups' solutions, must equal it to
+the solver's stopping error (the ``tolerance`` setting, relative, on each of the two solves)
+plus float32 at the Blender boundary. Receiver elements are off where groups are mixed: a fresh
+bake places them where *its* light changes, a relight keeps the bake's (core.relight).
+"""
+
+import json
+import os
+import tempfile
+
+import bpy
+import numpy as np
+import pytest
+
+from conftest import PACKAGE
+from helpers import box, material, mesh_object, read_colours, set_settings, square
+
+relight = PACKAGE.radiosity_addon.relight
+write = PACKAGE.radiosity_addon.write
+
+#: Two solves, each within ``tolerance`` (relative) of the exact solution, and float32 colours.
+RTOL = 2 * PACKAGE.core.BakeSettings().tolerance + 1e-5
+
+
+def room(power=40.0, lamp_strength=3.0, lamp_colour=(1.0, 1.0, 1.0)):
+    """A closed grey 3 m room (two materials), a 1 m emissive ceiling panel and a point light."""
+    bv, bf = box(3.0)
+    walls = mesh_object("Room", bv, bf, material("grey", (0.6, 0.5, 0.4)))
+    walls.data.materials.append(material("blue", (0.2, 0.3, 0.7)))
+    walls.data.polygons[0].material_index = 1
+    lv, lf = square(1.0, z=1.45, down=True)
+    lamp = mesh_object("Lamp", lv, lf, material("lamp", emission=lamp_colour,
+                                                strength=lamp_strength, kind="emission"))
+    bulb = bpy.data.objects.new("Bulb", bpy.data.lights.new("Bulb", "POINT"))
+    bulb.data.energy = power
+    bulb.location = (0.8, -0.5, 0.3)
+    bpy.context.scene.collection.objects.link(bulb)
+    return walls, lamp, bulb
+
+
+def bake(**settings):
+    kw = dict(output_mode="VERTICES", element_levels=0)
+    kw.update(settings)
+    set_settings(bpy.context.scene, **kw)
+    assert bpy.ops.radiosity.bake() == {"FINISHED"}
+
+
+def colours_and_lux(obj):
+    mesh = obj.data
+    lux = np.empty(len(mesh.loops), dtype=np.float32)
+    mesh.attributes["Radiosity Lux"].data.foreach_get("value", lux)
+    return read_colours(mesh), lux.astype(np.float64)
+
+
+def assert_close(actual, expected):
+    for a, e in zip(actual, expected):
+        assert a.shape == e.shape
+        scale = np.abs(e).max()
+        np.testing.assert_allclose(a, e, rtol=RTOL, atol=RTOL * scale)
+
+
+def set_lamp(lamp, strength=None, colour=None):
+    node = lamp.active_material.node_tree.nodes["Emission"]
+    if strength is not None:
+        node.inputs["Strength"].default_value = strength
+    if colour is not None:
+        node.inputs["Color"].default_value = (*colour, 1.0)
+
+
+def fresh(*objects):
+    """Colours and lux of a fresh bake of the scene as it is now (the oracle)."""
+    relight.drop(bpy.context.scene)
+    assert bpy.ops.radiosity.bake() == {"FINISHED"}
+    return [colours_and_lux(o) for o in objects]
+
+
+def test_relight_after_doubling_a_light_equals_a_fresh_bake(package):
+    walls, lamp, bulb = room()
+    bake()
+    bulb.data.energy *= 2.0
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    report = json.loads(bpy.context.scene.radiosity.last_report)
+    assert report["relight"]["seconds"] > 0 and report["relight"]["kept_mb"] > 0
+    relit = colours_and_lux(walls)
+    assert_close(relit, fresh(walls)[0])
+
+
+def test_relight_of_the_radiosity_mesh_is_linear_in_the_light(package):
+    # A fresh bake re-meshes where its light changes, so the oracle on the radiosity mesh is
+    # linearity: every light x 2.5 (lamp and bulb) reads 2.5 x the bake on the same mesh.
+    walls, lamp, bulb = room()
+    bake(output_mode="MESH", element_levels=2)
+    baked = colours_and_lux(walls)
+    n_faces = len(walls.data.polygons)
+    bulb.data.energy *= 2.5
+    set_lamp(lamp, strength=2.5 * 3.0)
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    assert len(walls.data.polygons) == n_faces
+    assert_close(colours_and_lux(walls), [2.5 * baked[0], 2.5 * baked[1]])
+
+
+def test_relight_after_a_colour_change_of_an_emissive_material_equals_a_fresh_bake(package):
+    walls, lamp, bulb = room(power=0.0)
+    bake()
+    before = colours_and_lux(walls)
+    set_lamp(lamp, strength=5.0, colour=(1.0, 0.5, 0.2))
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    relit = colours_and_lux(walls)
+    assert not np.allclose(relit[0], before[0])
+    assert_close(relit, fresh(walls)[0])
+
+
+def test_light_groups_mix_equals_a_fresh_bake_with_the_scaled_light(package):
+    walls, lamp, bulb = room()
+    bake()
+    groups = bpy.context.scene.radiosity_groups
+    assert [g.name for g in groups] == ["lamp", "Lights"]
+    groups["lamp"].strength = 0.5
+    groups["lamp"].tint = (1.0, 0.8, 0.6)   # each change writes at once (update callback)
+    groups["Lights"].strength = 2.0
+    mixed = colours_and_lux(walls)
+    set_lamp(lamp, strength=1.5, colour=(1.0, 0.8, 0.6))
+    bulb.data.energy *= 2.0
+    for g in groups:
+        g.strength, g.tint = 1.0, (1.0, 1.0, 1.0)
+    assert_close(mixed, fresh(walls)[0])
+
+
+def test_blender_light_groups_merge_what_they_hold(package):
+    walls, lamp, bulb = room()
+    lamp.lightgroup = bulb.lightgroup = "Ceiling"
+    bake()
+    assert [g.name for g in bpy.context.scene.radiosity_groups] == ["Ceiling"]
+
+
+def _move_vertex(walls, lamp):
+    write.original_mesh(walls).vertices[0].co.x -= 0.2   # the user's mesh, not the baked one
+
+
+def _recolour_wall(walls, lamp):
+    walls.active_material.node_tree.nodes["Principled BSDF"].inputs["Base Color"] \
+        .default_value = (0.1, 0.9, 0.1, 1.0)
+
+
+def _new_emitter(walls, lamp):
+    inputs = walls.data.materials[1].node_tree.nodes["Principled BSDF"].inputs
+    inputs["Emission Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    inputs["Emission Strength"].default_value = 2.0
+
+
+@pytest.mark.parametrize("change, message", [
+    (_move_vertex, "geometry changed"), (_recolour_wall, "material colours changed"),
+    (_new_emitter, "'blue' emits now")])
+def test_relight_with_changed_scene_stops_and_changes_nothing(package, change, message):
+    walls, lamp, bulb = room()
+    bake(output_mode="MESH")
+    before = colours_and_lux(walls)
+    report = bpy.context.scene.radiosity.last_report
+    change(walls, lamp)
+    bulb.data.energy *= 2.0
+    with pytest.raises(RuntimeError, match=f"{message}.*bake again"):
+        bpy.ops.radiosity.relight()
+    assert_close(colours_and_lux(walls), before)
+    assert bpy.context.scene.radiosity.last_report == report
+
+
+@pytest.mark.parametrize("mode", ["VERTICES", "MESH"])
+def test_relight_with_lights_changed_apart_or_moved_equals_a_fresh_bake(package, mode):
+    # The lights' direct light is kept summed: lights changed apart are cast again (shadow
+    # rays and gathers; the radiosity mesh is made again), the form factors kept.
+    walls, lamp, bulb = room()
+    other = bpy.data.objects.new("Bulb2", bpy.data.lights.new("Bulb2", "SPOT"))
+    other.data.energy = 60.0
+    other.location = (-0.9, 0.4, 1.2)
+    bpy.context.scene.collection.objects.link(other)
+    bake(output_mode=mode)
+    bulb.data.energy *= 2.0
+    other.data.color = (1.0, 0.4, 0.1)
+    other.location = (-0.5, -0.6, 1.1)
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    relit = colours_and_lux(walls)
+    if mode == "VERTICES":                    # and relit again from there: scaled alike
+        set_lamp(lamp, strength=1.0)
+        bulb.data.energy *= 0.5
+        other.data.energy *= 0.5
+        assert bpy.ops.radiosity.relight() == {"FINISHED"}
+        assert not np.allclose(relit[1], colours_and_lux(walls)[1])
+        relit = colours_and_lux(walls)
+    expected = fresh(walls)[0]
+    assert relit[0].shape == expected[0].shape   # the radiosity mesh made again alike
+    assert_close(relit, expected)
+
+
+def test_relight_without_a_kept_bake_says_bake_again(package):
+    walls, lamp, bulb = room()
+    with pytest.raises(RuntimeError, match="no bake is kept.*bake again"):
+        bpy.ops.radiosity.relight()
+    bake()
+    path = os.path.join(tempfile.mkdtemp(), "relight.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)     # the kept data does not survive the file
+    bpy.data.objects["Bulb"].data.energy *= 2.0
+    with pytest.raises(RuntimeError, match="no bake is kept.*bake again"):
+        bpy.ops.radiosity.relight()
+
+
+@pytest.mark.parametrize("mode", ["VERTICES", "MESH"])
+def test_clear_bake_after_relight_restores_the_scene_exactly(package, mode):
+    from test_write_mesh import assert_same, snapshot
+
+    walls, lamp, bulb = room()
+    original = walls.data
+    before = snapshot(original)
+    bake(output_mode=mode)
+    set_lamp(lamp, strength=6.0)
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    bpy.context.scene.radiosity_groups["Lights"].strength = 0.3
+    set_settings(bpy.context.scene, selected_only=False)
+    assert bpy.ops.radiosity.clear() == {"FINISHED"}
+    assert walls.data == original
+    assert_same(snapshot(walls.data), before)
+    assert not any(m.name.endswith(write.BAKED_SUFFIX) for m in bpy.data.meshes)
+    assert not any(k.startswith("radiosity") for k in walls.keys())
+    assert relight.kept(bpy.context.scene) is None
+    with pytest.raises(RuntimeError, match="bake again"):
+        bpy.ops.radiosity.relight()
+
+
+def test_forget_frees_the_kept_bake_and_relight_says_bake_again(package):
+    walls, lamp, bulb = room()
+    bake()
+    assert relight.kept(bpy.context.scene).kept_mb > 0
+    assert bpy.ops.radiosity.relight_forget() == {"FINISHED"}
+    assert relight.kept(bpy.context.scene) is None
+    assert len(bpy.context.scene.radiosity_groups) == 0
+    with pytest.raises(RuntimeError, match="no bake is kept.*bake again"):
+        bpy.ops.radiosity.relight()
+
+
+@pytest.mark.parametrize("mode", ["VERTICES", "MESH"])
+def test_group_changes_after_the_first_are_a_weighted_sum_with_no_solve(package, monkeypatch,
+                                                                        mode):
+    # Oracles: the groups at 1 give the bake back (the groups' solutions add up to it), and
+    # the groups alone add up to any mix (linearity) -- on the bake's radiosity mesh too.
+    walls, lamp, bulb = room()
+    bake(output_mode=mode, element_levels=2 if mode == "MESH" else 0)
+    baked = colours_and_lux(walls)
+    groups = bpy.context.scene.radiosity_groups
+    groups["lamp"].strength = 2.0            # the groups' solutions are made here, once
+    twice = colours_and_lux(walls)
+
+    def no_solve(*args, **kwargs):
+        raise AssertionError("a light group change solved again")
+    monkeypatch.setattr(relight.core, "relight", no_solve)
+    groups["lamp"].strength = 1.0
+    assert_close(colours_and_lux(walls), baked)
+    groups["lamp"].strength = 2.0
+    assert_close(colours_and_lux(walls), twice)
+    groups["Lights"].strength = 0.0          # the lamp alone: its own group's solution
+    lamp_only = colours_and_lux(walls)
+    groups["Lights"].strength = 1.0
+    groups["lamp"].strength = 0.0            # the bulb alone; the two add up to the mix
+    bulb_only = colours_and_lux(walls)
+    assert_close(twice, [lamp_only[k] + bulb_only[k] for k in range(2)])
+    assert not np.allclose(twice[0], baked[0])
+    assert bpy.ops.radiosity.groups_reset() == {"FINISHED"}
+    assert [(g.strength, tuple(g.tint)) for g in groups] == [(1.0, (1.0, 1.0, 1.0))] * 2
+    assert_close(colours_and_lux(walls), baked)
+
+
+def test_batch_group_strength_equals_a_fresh_bake(package, tmp_path):
+    from test_batch import one_error_line, run_batch
+
+    walls, lamp, bulb = room()
+    set_settings(bpy.context.scene, output_mode="VERTICES", element_levels=0)
+    src, out = tmp_path / "room.blend", tmp_path / "mixed.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(src))
+    proc = run_batch(src, "--output", out, "--group-strength", "lamp=0.5",
+                     "--group-strength", "Lights=2")
+    assert proc.returncode == 0, proc.stderr
+    bpy.ops.wm.open_mainfile(filepath=str(out))
+    mixed = colours_and_lux(bpy.data.objects["Room"])
+    set_lamp(bpy.data.objects["Lamp"], strength=1.5)
+    bpy.data.objects["Bulb"].data.energy *= 2.0
+    assert_close(mixed, fresh(bpy.data.objects["Room"])[0])
+    line = one_error_line(run_batch(src, "--output", tmp_path / "x.blend",
+                                    "--group-strength", "Sun=2"))
+    assert "no light group of that name" in line and "'lamp', 'Lights'" in line
+    line = one_error_line(run_batch(src, "--output", tmp_path / "x.blend",
+                                    "--group-strength", "lamp"))
+    assert "NAME=FACTOR" in line
+
+
+def test_relight_after_undoing_the_bake_says_bake_again_and_writes_nothing(package):
+    walls, lamp, bulb = room()
+    set_settings(bpy.context.scene, output_mode="VERTICES", element_levels=0)
+    bpy.ops.ed.undo_push(message="scene")
+    assert bpy.ops.radiosity.bake("EXEC_DEFAULT", True) == {"FINISHED"}
+    bpy.ops.ed.undo()
+    walls = bpy.data.objects["Room"]
+    assert "Radiosity" not in walls.data.color_attributes
+    with pytest.raises(RuntimeError, match="no longer shows the bake.*bake again"):
+        bpy.ops.radiosity.relight()
+    assert "Radiosity" not in walls.data.color_attributes
+
+
+def test_relight_with_an_area_light_relights_both_sides_of_a_two_sided_emitter(package):
+    # An area light makes the scene's emitters one-sided or two-sided per material (the core's
+    # back_emission): the lamp's back, 5 cm under the ceiling, lights the ceiling, and must
+    # follow the lamp's new colour as a fresh bake's does.
+    walls, lamp, bulb = room(power=0.0)
+    panel = bpy.data.objects.new("Panel", bpy.data.lights.new("Panel", "AREA"))
+    panel.data.size, panel.data.energy = 0.5, 60.0
+    panel.location = (-0.8, 0.6, 1.2)
+    bpy.context.scene.collection.objects.link(panel)
+    bake()
+    assert [g.name for g in bpy.context.scene.radiosity_groups] == ["lamp", "light: Panel"]
+    set_lamp(lamp, strength=4.0, colour=(0.3, 0.6, 1.0))
+    panel.data.energy = 30.0
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    relit = colours_and_lux(walls)
+    assert_close(relit, fresh(walls)[0])
+
+
+def test_calculation_surfaces_follow_relight_and_groups(package):
+    # Oracle: a fresh bake with the mixed light measures the same grid lux and vertex lux.
+    walls, lamp, bulb = room()
+    plane = mesh_object("Desk", *square(1.2, z=-0.7))
+    plane.radiosity_calc_surface = True
+    bake()
+    set_lamp(lamp, strength=4.5)
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    bpy.context.scene.radiosity_groups["Lights"].strength = 0.5
+
+    def measured():
+        report = json.loads(bpy.context.scene.radiosity.last_report)
+        (summary,) = report["calculation_surfaces"]
+        values = np.empty(len(plane.data.vertices), dtype=np.float32)
+        plane.data.attributes["Radiosity Lux"].data.foreach_get("value", values)
+        return [np.array([summary["Eavg"], summary["Emin"]]), values.astype(np.float64)]
+    mixed = measured()
+    bulb.data.energy *= 0.5
+    bpy.context.scene.radiosity_groups["Lights"].strength = 1.0
+    fresh(walls)
+    assert_close(mixed, measured())
+
+
+def test_a_bake_whose_kept_data_exceeds_the_memory_budget_is_not_kept(package, monkeypatch):
+    """The kept rows grow with the scene (the office: 458 MB): above the bake's memory budget
+    (1 GiB by default; not a panel setting, so lowered here) they are dropped, and Relight says
+    why."""
+    walls, lamp, bulb = room()
+    bake(output_mode="MESH", element_levels=2)
+    size = relight.kept(bpy.context.scene).kept_mb * 2 ** 20
+    budget = PACKAGE.core.settings.MIN_MEMORY_BUDGET
+    assert size > budget          # this room keeps more than the smallest budget allowed
+    monkeypatch.setattr(relight, "kept_budget", lambda bake_input: budget)
+    bake(output_mode="MESH", element_levels=2)
+    assert relight.kept(bpy.context.scene) is None
+    assert len(bpy.context.scene.radiosity_groups) == 0
+    with pytest.raises(RuntimeError, match=r"not kept in memory \(it needs \d+ MB, above the "
+                                           r"Memory Budget of 1 MB\); bake again"):
+        bpy.ops.radiosity.relight()
+    monkeypatch.undo()
+    bake(output_mode="MESH", element_levels=2)           # the default budget keeps it again
+    assert relight.kept(bpy.context.scene) is not None
