@@ -1,16 +1,27 @@
 """Relight and light groups (issue 12) against the bake, on the bundled samples, through the add-on.
 
 For each sample: the bake (radiosity.bake with the file's own settings), then a Relight after
-every emissive material's strength x 2 (one new solve on the kept form factors), the first
-light-group change (one solve per group, once) and a second one (a weighted sum, no solve), and
-the bytes the kept bake holds in memory (radiosity_addon.relight.kept_bytes).
+every emissive material's strength and every light's power x 2 (one new solve on the kept form
+factors, and the lights' own solution once), the first change of the first group (its own
+solution, once: a solve for a material, a cast for a light), a second one (a weighted sum, no
+solve), the first change of a point, spot or sun light's group (``group_light_first_s``: that
+light cast alone, when the scene has two lights or more) and the bytes the kept bake holds in
+memory (radiosity_addon.relight.kept_bytes).
 
-Run: ``.venv/bin/python bench/bench_relight.py [--scenes cornell_box office]``. Prints one JSON
-line per scene (seconds per step, the kept MB, the groups).
+``--scenes generated --patches 10000``: instead of a sample, an open-plan office built here
+(:func:`generated`: desks, four point lights, a spot, emissive ceiling panels) baked to vertices
+with the patch size that gives about that many patches; its Relight scales the panels only (one
+new solve), a second one the lights too (their own solution, one more solve, once). Relights
+print their CPU seconds too (``*_cpu_s``, this process: fairer on a busy machine) and whether
+the bake's reciprocity scaling was reused (``relight_balancing_reused``: no Sinkhorn sweep).
+
+Run: ``.venv/bin/python bench/bench_relight.py [--scenes cornell_box office generated]
+[--patches 10000]``. Prints one JSON line per scene (seconds per step, the kept MB, the groups).
 """
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -39,9 +50,91 @@ def emissive_inputs():
     return out
 
 
-def run(name):
-    bpy.ops.wm.open_mainfile(filepath=os.path.join(ROOT, "sample_blends", f"{name}.blend"),
-                             load_ui=False)
+#: The generated office (m): its size, its desks (rows x columns, size), its lights' height.
+OFFICE = (20.0, 12.0, 3.0)
+DESKS = (4, 6, (1.6, 0.8, 0.75))
+LIGHT_Z = 2.6
+
+
+def _mesh(name, verts, faces, mat):
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata([tuple(v) for v in verts], [], faces)
+    mesh.materials.append(mat)
+    obj = bpy.data.objects.new(name, mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    return obj
+
+
+def _material(name, colour, emission=0.0):
+    mat = bpy.data.materials.new(name)
+    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Base Color"].default_value = (*colour, 1.0)
+    if emission:
+        bsdf.inputs["Emission Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+        bsdf.inputs["Emission Strength"].default_value = emission
+    return mat
+
+
+def _box(lo, hi, outward=True):
+    (x0, y0, z0), (x1, y1, z1) = lo, hi
+    v = [(x0, y0, z0), (x1, y0, z0), (x1, y1, z0), (x0, y1, z0),
+         (x0, y0, z1), (x1, y0, z1), (x1, y1, z1), (x0, y1, z1)]
+    f = [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]
+    return v, f if outward else [tuple(reversed(q)) for q in f]
+
+
+def generated(patches):
+    """Build the open-plan office in an empty file; returns the patch size (m) that cuts its
+    surfaces into about ``patches`` patches (area / patches, square)."""
+    bpy.ops.wm.read_homefile(use_factory_startup=True, use_empty=True)
+    X, Y, Z = OFFICE
+    _mesh("Room", *_box((0, 0, 0), OFFICE, outward=False), _material("wall", (0.7, 0.68, 0.62)))
+    rows, cols, (w, d, h) = DESKS
+    desk = _material("desk", (0.55, 0.4, 0.3))
+    for i in range(rows):
+        for j in range(cols):
+            x, y = (j + 0.5) * X / cols - w / 2, (i + 0.5) * Y / rows - d / 2
+            _mesh(f"Desk {i}-{j}", *_box((x, y, 0), (x + w, y + d, h)), desk)
+    panel = _material("panel", (0.8, 0.8, 0.8), emission=6.0)
+    for k in range(4):
+        x, y = (k + 0.5) * X / 4, Y / 2
+        _mesh(f"Panel {k}", [(x - 0.6, y - 0.3, Z - 0.02), (x - 0.6, y + 0.3, Z - 0.02),
+                             (x + 0.6, y + 0.3, Z - 0.02), (x + 0.6, y - 0.3, Z - 0.02)],
+              [(0, 1, 2, 3)], panel)
+    for k, (kind, x, y) in enumerate([("POINT", 3, 3), ("POINT", 3, 9), ("POINT", 17, 3),
+                                      ("POINT", 17, 9), ("SPOT", 10, 6)]):
+        light = bpy.data.lights.new(f"Light {k}", kind)
+        light.energy = 300.0 if kind == "POINT" else 800.0
+        obj = bpy.data.objects.new(f"Light {k}", light)
+        obj.location = (x, y, LIGHT_Z)
+        bpy.context.scene.collection.objects.link(obj)
+    area = 2 * (X * Y + X * Z + Y * Z) + rows * cols * 2 * (w * d + w * h + d * h) \
+        + 4 * 1.2 * 0.6
+    return math.sqrt(area / patches)
+
+
+def _timings():
+    """The core's seconds per stage of the last bake or relight (its report)."""
+    timings = json.loads(bpy.context.scene.radiosity.last_report).get("timings", {})
+    return {k: round(v, 3) for k, v in timings.items()}
+
+
+def _reused():
+    """Whether the last relight reused the bake's reciprocity scaling (no Sinkhorn sweep)."""
+    report = json.loads(bpy.context.scene.radiosity.last_report)
+    return bool(report.get("reciprocity", {}).get("reused", False))
+
+
+def run(name, patches=10000, exact_direct=None):
+    if name == "generated":
+        size = generated(patches)
+        settings = bpy.context.scene.radiosity
+        settings.output_mode, settings.patch_size = "VERTICES", size
+        if exact_direct:
+            settings.exact_direct = exact_direct.upper()
+    else:
+        bpy.ops.wm.open_mainfile(filepath=os.path.join(ROOT, "sample_blends", f"{name}.blend"),
+                                 load_ui=False)
     relight = PACKAGE.radiosity_addon.relight
     t0 = time.perf_counter()
     assert bpy.ops.radiosity.bake() == {"FINISHED"}
@@ -49,11 +142,21 @@ def run(name):
     report = json.loads(bpy.context.scene.radiosity.last_report)
     for sock in emissive_inputs():
         sock.default_value *= 2.0
+    extra = {}
+    if name == "generated":     # the emission alone first: exactly one new solve
+        t0, c0 = time.perf_counter(), time.process_time()
+        assert bpy.ops.radiosity.relight() == {"FINISHED"}
+        extra["relight_emission_s"] = round(time.perf_counter() - t0, 3)
+        extra["relight_emission_cpu_s"] = round(time.process_time() - c0, 3)
+        extra["relight_emission_core"] = _timings()
+        extra["relight_balancing_reused"] = _reused()
     for light in bpy.data.lights:
         light.energy *= 2.0
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     assert bpy.ops.radiosity.relight() == {"FINISHED"}
     relit = time.perf_counter() - t0
+    extra["relight_cpu_s"] = round(time.process_time() - c0, 3)
+    extra["relight_core"] = _timings()
     entry = relight.kept(bpy.context.scene)
     groups = bpy.context.scene.radiosity_groups
     t0 = time.perf_counter()
@@ -62,22 +165,34 @@ def run(name):
     t0 = time.perf_counter()
     groups[0].strength = 0.25
     second = time.perf_counter() - t0
+    lights = [u.group for u in entry.units if u.materials is None and u.lights]
+    if len(lights) > 1:
+        t0 = time.perf_counter()
+        groups[lights[0]].strength = 0.5
+        extra["group_light_first_s"] = round(time.perf_counter() - t0, 3)
     return dict(scene=name, bake_s=round(bake, 2),
                 bake_core_s=round(report["timings"]["total"], 2),
+                bake_solve_s=round(report["timings"].get("solve", 0.0), 3), **extra,
                 relight_s=round(relit, 3), group_first_s=round(first, 3),
                 group_next_s=round(second, 3), groups=[g.name for g in groups],
                 patches=report["patches"], form_factor_mb=round(
                     report["form_factor_bytes"] / 2 ** 20, 2),
-                kept_mb=round(relight.kept_bytes(entry) / 2 ** 20, 2))
+                kept_mb=round(relight.kept_bytes(entry) / 2 ** 20, 2),
+                group_seconds={k: round(v, 3) for k, v in entry.seconds.items()})
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenes", nargs="+", default=["cornell_box", "office"])
+    parser.add_argument("--scenes", nargs="+", default=["cornell_box", "office"],
+                        help="bundled samples, or 'generated' (see --patches)")
+    parser.add_argument("--patches", type=int, default=10000,
+                        help="about how many patches the generated scene has (default 10000)")
+    parser.add_argument("--exact-direct", choices=["auto", "all", "off"],
+                        help="the generated scene's Exact Emitters (default: the add-on's, auto)")
     args = parser.parse_args()
     PACKAGE.register()
     for name in args.scenes:
-        print(json.dumps(run(name)), flush=True)
+        print(json.dumps(run(name, args.patches, args.exact_direct)), flush=True)
 
 
 if __name__ == "__main__":

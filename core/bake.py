@@ -102,6 +102,7 @@ class _State:
     flipped: np.ndarray = None    # (F,) bool: faces baked on their back side (core.orient)
     direct: object = None         # core.lights.DirectLight of the scene's lights, or None
     solved: np.ndarray = None     # (2P, 3) solved node radiance (exact emitters' light apart)
+    balance: object = None        # core.pipeline.KeptBalance: the reciprocity scaling, or None
 
 
 def bake(scene, settings=None, *, progress=None, cancel=None):
@@ -284,7 +285,9 @@ def relight(result, *, reflectance=None, emission=None, back_emission=None, ligh
     """Re-solve a bake with new material reflectance and/or emission, reusing its form factors.
 
     Nodes that become emitters but were never reached get their rows computed (only those
-    rows). A new emission with exact emitters (``exact_direct``, core.emitters) casts their
+    rows). The reciprocity scaling of the form factors is kept too and applied again without
+    iterating while the solved nodes are the same (new rows: it is computed again). A new
+    emission with exact emitters (``exact_direct``, core.emitters) casts their
     shadow rays and gathers again. A matrix-free (progressive) bake kept no form factors: it is
     recomputed from scratch and the report says so.
 
@@ -408,7 +411,7 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     monitor.stage(*_STAGES["solve"])
     monitor.update(0.0, "solving")
     t0 = time.perf_counter()
-    sol = solve(ff, nodes, settings, monitor)
+    sol = solve(ff, nodes, settings, monitor, kept.balance if kept is not None else None)
     monitor.update(1.0, "solved")
     timings["solve"] = time.perf_counter() - t0
     memory.mark("solve")
@@ -499,6 +502,6 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
         if direct.emitters is not None:
             report["lights"]["exact_emitter_faces"] = int(direct.emitters.faces.size)
     state = _State(scene, settings, patches, sol.store, ff.active, gather, on_contact,
-                   contact_lines, side.flipped, direct, sol.node_radiance)
+                   contact_lines, side.flipped, direct, sol.node_radiance, sol.balance)
     return BakeResult(corner, patch_radiance, shown, patches, report, state, output=mesh,
                       corner_incident=incident)

@@ -7,6 +7,8 @@ part's rows with the same code, and the parts are put back in order. A row depen
 own eye, never on which eyes share a chunk (``tests/core/test_parallel.py`` checks it), so the
 result is bit-identical to a bake in one process. The hemicube kernel is where a bake spends its
 time: the patches' form-factor rows, the element gathers and the output vertices' gathers.
+Shadow rays are shared the same way (:func:`share_rays`, from :mod:`core.raycast`): a ray's
+answer depends on that ray alone.
 
 **How workers start.** Each is a Python process started with the interpreter this process runs on
 (``sys.executable``: inside Blender, the Python that Blender reports; with the bpy module, the
@@ -28,10 +30,7 @@ import collections
 import contextlib
 import itertools
 import os
-import pickle
 import queue
-import struct
-import subprocess
 import sys
 import threading
 import time
@@ -42,6 +41,7 @@ import numpy as np
 
 from .errors import BakeCancelled
 from .memory import peak_mb
+from .pipes import WorkerError, _command, _receive, _send, _Worker
 
 #: Seconds between two looks at the cancel check while the workers compute.
 WAIT_STEP = 0.05
@@ -53,16 +53,22 @@ MIN_EYES = 8
 #: Seconds a starting worker has to import NumPy and this package and say it is ready.
 START_TIMEOUT = 60.0
 
+#: Fewest rays worth sharing with the workers (a ray costs about 15 us; sending one 56 bytes).
+MIN_RAYS = 4096
+
+#: Ray-casting trees a worker keeps (the scene's, and the exact emitters' or lights' own).
+KEPT_TREES = 2
+
 #: Sets of polygons a worker keeps (a bake alternates between a few: the patches, the receiver
 #: elements, a gather's far-field mix).
 KEPT_GEOMETRIES = 4
 
-_HEADER = struct.Struct("<Q")
 _local = threading.local()
 _pool_lock = threading.Lock()
 _pool = [None]              # the process's Pool, or None
 _backend = [None]           # another engine's pool (set_backend), or None
 _tokens = weakref.WeakKeyDictionary()
+_tree_tokens = {}          # id -> (weak reference, token): trees compare by value
 _next_token = itertools.count(1)
 
 
@@ -178,9 +184,7 @@ def submit(sc, eyes, frames, out, sky_out=None):
         try:
             cpu = pool.cpu_seconds
             pool.collect(job, out, context.cancel, sky_out)
-            stats["cpu_seconds"] += pool.cpu_seconds - cpu
-            if pool.peak_mb is not None:
-                stats["peak_mb"] = round(max(pool.peak_mb, stats["peak_mb"] or 0.0), 1)
+            _tally(stats, pool, cpu)
             return out
         except WorkerError as exc:     # a worker died or failed: this process does the rest
             stats["problem"] = str(exc)
@@ -200,12 +204,42 @@ def share(sc, eyes, frames, out, sky_out=None):
     return True
 
 
+def share_rays(bvh, o, d, dn, t_max, any_mode):
+    """(t, triangle) of every ray (:func:`core.raycast.cast`'s answer) computed by the workers,
+    or None when the call is not shared (no pool in use, too few rays, another engine's
+    backend, no workers): the caller then casts them itself."""
+    context = getattr(_local, "context", None)
+    if context is None or context.backend is not None or o.shape[0] < MIN_RAYS:
+        return None
+    pool = context.pool()
+    if pool is None:
+        return None
+    parts = min(context.n, o.shape[0] // (MIN_RAYS // 2))
+    stats, cpu = context.stats, pool.cpu_seconds
+    try:
+        hits = pool.collect_rays(pool.submit_rays(bvh, (o, d, dn, t_max), any_mode, parts),
+                                 context.cancel)
+    except WorkerError as exc:     # a worker died or failed: this process casts them
+        stats["problem"] = str(exc)
+        return None
+    stats["processes"], stats["calls"] = max(stats["processes"], parts), stats["calls"] + 1
+    _tally(stats, pool, cpu)
+    return hits
+
+
+def _tally(stats, pool, cpu):
+    """Add a collected call's worker CPU time (the pool's since ``cpu``) and peak to ``stats``."""
+    stats["cpu_seconds"] += pool.cpu_seconds - cpu
+    if pool.peak_mb is not None:
+        stats["peak_mb"] = round(max(pool.peak_mb, stats["peak_mb"] or 0.0), 1)
+
+
 def set_backend(backend):
     """Share every bake's hemicube calls with ``backend`` from now on (None: this machine's
     worker processes again); the previous backend is returned.
 
     A backend is another engine's pool with :class:`Pool`'s interface: ``name``, ``size`` (the
-    parts a call is cut into), ``pending`` (a deque of the submitted jobs' ids, oldest first),
+    parts a call is cut into), ``pending`` (the submitted, uncollected jobs; empty when idle),
     ``cpu_seconds``, ``peak_mb``, ``submit(sc, eyes, frames, parts)`` -> job, ``collect(job,
     out, cancel, sky_out)`` (raising this module's :class:`WorkerError` on a failure and
     :class:`core.errors.BakeCancelled` on a cancel), ``alive()`` and ``close()``. Its parts
@@ -270,108 +304,20 @@ def close():
 atexit.register(close)
 
 
-class WorkerError(RuntimeError):
-    """A worker could not start, or failed; the message carries its own traceback."""
-
-
 def _token(geometry):
-    """A number naming ``geometry`` (a core.hemicube_chunk.Geometry) for as long as it lives."""
+    """A number naming ``geometry`` (a core.hemicube_chunk.Geometry, or a core.raycast.BVH,
+    which compares by value and so is kept by its id) for as long as it lives."""
+    if hasattr(geometry, "__dataclass_fields__"):
+        kept = _tree_tokens.get(id(geometry))
+        if kept is None or kept[0]() is not geometry:
+            kept = _tree_tokens[id(geometry)] = (weakref.ref(geometry), next(_next_token))
+            for key in [k for k, (ref, _) in _tree_tokens.items() if ref() is None]:
+                del _tree_tokens[key]
+        return kept[1]
     token = _tokens.get(geometry)
     if token is None:
         token = _tokens[geometry] = next(_next_token)
     return token
-
-
-def _command():
-    """The command that starts one worker, or WorkerError when no interpreter can be found."""
-    exe = sys.executable or ""
-    if "python" not in os.path.basename(exe).lower():
-        base = getattr(sys, "_base_executable", "") or ""
-        exe = base if "python" in os.path.basename(base).lower() else ""
-    if not exe or not os.path.exists(exe):
-        raise WorkerError(f"no Python interpreter to start workers with (sys.executable is "
-                          f"{sys.executable!r})")
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    code = (f"import sys; sys.path.insert(0, {root!r}); "
-            "from core.parallel import serve; serve()")
-    return [exe, "-c", code]
-
-
-def _send(stream, message):
-    data = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
-    stream.write(_HEADER.pack(len(data)))
-    stream.write(data)
-    stream.flush()
-
-
-def _receive(stream):
-    """The next message, or None at the end of the stream."""
-    head = stream.read(_HEADER.size)
-    if len(head) < _HEADER.size:
-        return None
-    (size,) = _HEADER.unpack(head)
-    data = stream.read(size)
-    if len(data) < size:
-        return None
-    return pickle.loads(data)
-
-
-class _Worker:
-    """One worker process, a thread that reads its answers into a queue (portable: waiting on a
-    queue with a timeout works on every platform, select on pipes does not), and a thread that
-    writes the messages for it, so that the bake never waits on a full pipe while the worker
-    still computes the previous call."""
-
-    def __init__(self, command, env):
-        # No console window per worker on Windows (Blender runs without one).
-        flags = getattr(subprocess, "CREATE_NO_WINDOW", 0) if sys.platform == "win32" else 0
-        self.proc = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     env=env, creationflags=flags)
-        self.answers = queue.Queue()
-        self.outbox = queue.Queue()
-        self.kept = collections.deque()         # geometry tokens the worker holds, oldest first
-        self.reader = threading.Thread(target=self._read, daemon=True)
-        self.reader.start()
-        self.writer = threading.Thread(target=self._write, daemon=True)
-        self.writer.start()
-
-    def _write(self):
-        while True:
-            data = self.outbox.get()
-            if data is None:
-                return
-            try:
-                self.proc.stdin.write(_HEADER.pack(len(data)))
-                self.proc.stdin.write(data)
-                self.proc.stdin.flush()
-            except (OSError, ValueError):       # the worker is gone: the reader reports it
-                return
-
-    def _read(self):
-        try:
-            while True:
-                message = _receive(self.proc.stdout)
-                self.answers.put(message)
-                if message is None:
-                    return
-        except (OSError, ValueError, EOFError, pickle.UnpicklingError):
-            self.answers.put(None)
-
-    def send(self, message):
-        self.outbox.put(pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL))
-
-    def kill(self):
-        if self.proc.poll() is None:
-            self.proc.kill()
-        self.outbox.put(None)
-        try:
-            self.proc.stdin.close()
-        except (OSError, ValueError):
-            pass
-        try:
-            self.proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            pass
 
 
 class Pool:
@@ -385,7 +331,7 @@ class Pool:
         for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
             env[name] = "1"
         self.workers = []
-        self.pending = collections.deque()      # submitted jobs not yet collected, in order
+        self.pending = collections.deque()      # ids of the jobs not yet collected
         self.ready = []                         # each worker's first message (pid, module)
         self.peak_mb = None                     # the workers' largest peak resident set, MiB
         self.cpu_seconds = 0.0                  # CPU time the workers spent on rows
@@ -431,38 +377,73 @@ class Pool:
                     if len(worker.kept) > KEPT_GEOMETRIES:
                         worker.kept.popleft()
                 lo, hi = bounds[k], bounds[k + 1]
-                worker.send(("rows", token, scalars, eyes[lo:hi], frames[lo:hi]))
+                worker.send(("rows", job[0], token, scalars, eyes[lo:hi], frames[lo:hi]))
         except (OSError, ValueError) as exc:
             self.close()
             raise WorkerError(f"a worker process stopped: {exc}") from exc
         return job
 
+    def submit_rays(self, bvh, rays, any_mode, parts):
+        """Send ``parts`` contiguous parts of ``rays`` (origins, directions, their lengths,
+        t_max) to the first ``parts`` workers, with ``bvh`` if they lack it; the job."""
+        token = _token(bvh)
+        bounds = np.linspace(0, rays[0].shape[0], parts + 1).round().astype(np.int64)
+        job = (next(_next_token), bounds)
+        self.pending.append(job[0])
+        try:
+            for k in range(parts):
+                worker = self.workers[k]
+                if token not in worker.kept_trees:
+                    worker.send(("tree", token, dict(vars(bvh))))
+                    worker.kept_trees.append(token)
+                    if len(worker.kept_trees) > KEPT_TREES:
+                        worker.kept_trees.popleft()
+                lo, hi = bounds[k], bounds[k + 1]
+                worker.send(("rays", job[0], token, [a[lo:hi] for a in rays], any_mode))
+        except (OSError, ValueError) as exc:
+            self.close()
+            raise WorkerError(f"a worker process stopped: {exc}") from exc
+        return job
+
+    def collect_rays(self, job, cancel):
+        """(t, triangle) of a job of :meth:`submit_rays`, the parts put back in order."""
+        return tuple(np.concatenate(a) for a in zip(*(p[0] for p in self._collect(job, cancel))))
+
     def collect(self, job, out, cancel, sky_out=None):
         """The rows of a submitted ``job`` into ``out`` (returned), its sky light into
         ``sky_out`` (when it has a sky); BakeCancelled when ``cancel`` says so (the workers are
-        killed), WorkerError when one fails."""
+        killed), WorkerError when one fails. Jobs may be collected in any order (a worker
+        answers in the order it was sent the jobs; answers to later jobs wait)."""
+        bounds = job[1]
+        for k, (rows, sky) in enumerate(self._collect(job, cancel)):
+            out[bounds[k]:bounds[k + 1]] = rows
+            if sky_out is not None:
+                sky_out[bounds[k]:bounds[k + 1]] = sky
+        return out
+
+    def _collect(self, job, cancel):
+        """[(answer, extra)] of each part of ``job``, in order."""
         ident, bounds = job
         if not self.workers:
             raise WorkerError("the workers were stopped by an earlier failure")
-        if not self.pending or self.pending[0] != ident:
-            raise RuntimeError("worker jobs must be collected in the order they were submitted")
+        if ident not in self.pending:
+            raise RuntimeError("this worker job was collected already, or never submitted")
         done = False
         try:
-            for k in range(bounds.size - 1):
-                rows, sky = self._answer(self.workers[k], cancel)
-                out[bounds[k]:bounds[k + 1]] = rows
-                if sky_out is not None:
-                    sky_out[bounds[k]:bounds[k + 1]] = sky
+            parts = [self._answer(self.workers[k], ident, cancel)
+                     for k in range(bounds.size - 1)]
             done = True
         finally:
             if done:
-                self.pending.popleft()
+                self.pending.remove(ident)
             else:       # cancelled, failed or interrupted: the workers' state is unknown
                 self.close()
-        return out
+        return parts
 
-    def _answer(self, worker, cancel):
-        while True:
+    def _answer(self, worker, ident, cancel):
+        """The worker's answer to job ``ident``; answers to other jobs read meanwhile wait in
+        ``worker.early``."""
+        while ident not in worker.early:
             if cancel is not None and cancel():
                 raise BakeCancelled("bake cancelled")
             try:
@@ -474,10 +455,12 @@ class Pool:
                                   f"(code {worker.proc.poll()})")
             if answer[0] == "error":
                 raise WorkerError(f"worker process {worker.proc.pid} failed:\n{answer[1]}")
-            if answer[2] is not None:
-                self.peak_mb = max(self.peak_mb or 0.0, answer[2])
-            self.cpu_seconds += answer[3]
-            return answer[1], answer[4]
+            worker.early[answer[5]] = answer
+        answer = worker.early.pop(ident)
+        if answer[2] is not None:
+            self.peak_mb = max(self.peak_mb or 0.0, answer[2])
+        self.cpu_seconds += answer[3]
+        return answer[1], answer[4]
 
 
 def serve():
@@ -490,6 +473,7 @@ def serve():
     err = sys.stderr.fileno() if sys.stderr is not None else os.open(os.devnull, os.O_WRONLY)
     os.dup2(err, sys.stdout.fileno())
     kept = collections.OrderedDict()
+    trees = collections.OrderedDict()
     _send(sink, ("ready", dict(pid=os.getpid(), module=__name__, bpy="bpy" in sys.modules)))
     while True:
         message = _receive(source)
@@ -503,9 +487,22 @@ def serve():
                 while len(kept) > KEPT_GEOMETRIES:
                     kept.popitem(last=False)
                 continue
-            _, token, scalars, eyes, frames = message
+            if message[0] == "tree":
+                from .raycast import BVH
+                trees[message[1]] = BVH(**message[2])
+                while len(trees) > KEPT_TREES:
+                    trees.popitem(last=False)
+                continue
+            if message[0] == "rays":
+                from .raycast import cast
+                _, ident, token, rays, any_mode = message
+                tic = time.process_time()
+                hits = cast(trees[token], *rays, any_mode)
+                _send(sink, ("rays", hits, peak_mb(), time.process_time() - tic, None, ident))
+                continue
+            _, ident, token, scalars, eyes, frames = message
             out, sky_out, peak, cpu = compute_part(kept[token], scalars, eyes, frames)
-            _send(sink, ("rows", out, peak, cpu, sky_out))
+            _send(sink, ("rows", out, peak, cpu, sky_out, ident))
         except Exception:                          # noqa: BLE001 - reported to the parent
             _send(sink, ("error", traceback.format_exc()))
 

@@ -31,7 +31,7 @@ from .elements import bake_elements
 from .gather import corner_groups, gather_rows, gathered_colours
 from .orient import BACKLIGHT_RATIO, MIN_LIT
 from .progress import SubMonitor
-from .reciprocity import asymmetry, make_reciprocal
+from .reciprocity import asymmetry, make_reciprocal, rebalance
 from .rows import (RECIPROCAL_METHODS, Batcher, RowStore, discover, row_function, row_seconds,
                    split_rows)
 from .sky import is_directional
@@ -298,6 +298,8 @@ class Solution:
     store : core.rows.RowStore or None
         Rows kept for relight (None after a matrix-free solve).
     warnings : list of str
+    balance : KeptBalance or None
+        The reciprocity scaling of a dense solve, kept for relight (None without one).
     """
 
     node_radiance: np.ndarray
@@ -310,16 +312,43 @@ class Solution:
     matrix_bytes: int
     store: object
     warnings: list
+    balance: object = None
 
 
-def solve(ff, nodes, settings, monitor):
-    """Solve the radiosity system of the active nodes (dense, or matrix-free if too big)."""
+@dataclass(frozen=True)
+class KeptBalance:
+    """The reciprocity scaling of a dense solve (:class:`core.reciprocity.Balance`) and what
+    its matrix was assembled from. It depends on the form factors and areas only, not on the
+    emission or the reflectance: a relight with the same solved nodes and the same stored rows
+    rebuilds the reciprocal matrix from it (:func:`core.reciprocity.rebalance`) instead of
+    iterating again. Holds 8 bytes per solved node (and per unscaled node); ``active`` is the
+    solve's own array and ``batches`` the store's own, shared, not copied."""
+
+    balance: object
+    active: np.ndarray          # (2P,) bool: the solved nodes, the rows and columns
+    batches: tuple              # the RowStore batches the matrix was assembled from
+
+    def fits(self, active, store, dtype):
+        """True when the matrix of ``active`` from ``store`` in ``dtype`` is the one balanced:
+        same nodes, same rows (a relight that reached new nodes added rows: recompute)."""
+        return (self.balance.dtype == np.dtype(dtype)
+                and len(store.batches) == len(self.batches)
+                and all(a is b for a, b in zip(store.batches, self.batches))
+                and np.array_equal(active, self.active))
+
+
+def solve(ff, nodes, settings, monitor, kept=None):
+    """Solve the radiosity system of the active nodes (dense, or matrix-free if too big).
+
+    ``kept``: the :class:`KeptBalance` of an earlier solve on these form factors (relight),
+    reused when it :meth:`~KeptBalance.fits`.
+    """
     idx = np.flatnonzero(ff.active)
     solver, warnings = choose_solver(settings, len(idx), ff.overflow)
     if solver == "progressive_free":
         sol = _solve_matrix_free(ff, nodes, settings, monitor)
     else:
-        sol = _solve_dense(ff, nodes, settings, solver, monitor)
+        sol = _solve_dense(ff, nodes, settings, solver, monitor, kept)
     if not sol.result.converged:
         r = sol.result
         warnings.append(f"solver '{r.solver}' stopped after {r.iterations} iterations at "
@@ -328,7 +357,7 @@ def solve(ff, nodes, settings, monitor):
     return dataclasses.replace(sol, warnings=warnings + sol.warnings)
 
 
-def _solve_dense(ff, nodes, settings, solver, monitor):
+def _solve_dense(ff, nodes, settings, solver, monitor, kept=None):
     store, rho, le, areas = ff.store, nodes.rho, nodes.source, nodes.areas
     N = len(areas)
     idx = np.flatnonzero(ff.active)
@@ -338,8 +367,14 @@ def _solve_dense(ff, nodes, settings, solver, monitor):
     use_recip = settings.reciprocity
     if use_recip == "auto":
         use_recip = settings.method in RECIPROCAL_METHODS
-    if use_recip:
-        F, recip = make_reciprocal(F, areas[idx], monitor=monitor)
+    balanced = None
+    if use_recip and kept is not None and kept.fits(ff.active, store, dtype):
+        # Same matrix as the kept solve's: its scaling, in place, without the Sinkhorn sweeps.
+        F = rebalance(F, areas[idx], kept.balance, out=F, monitor=monitor)
+        recip, balanced = dict(kept.balance.info, reused=True), kept
+    elif use_recip:
+        F, recip, found = make_reciprocal(F, areas[idx], monitor=monitor, return_balance=True)
+        balanced = KeptBalance(found, ff.active, tuple(store.batches))
     else:
         recip = dict(asymmetry_before=asymmetry(F, areas[idx], monitor), sinkhorn_iterations=0)
     black = np.flatnonzero(store.hit() & ~nodes.allowed)   # black back nodes that light reaches
@@ -378,7 +413,7 @@ def _solve_dense(ff, nodes, settings, solver, monitor):
         + exact_out - exact_in
     escaped = escaped + exact_out - exact_in
     return Solution(node_radiance, res, solver, ff.active, incident,
-                    (emitted, absorbed, escaped), recip, int(matrix_bytes), store, [])
+                    (emitted, absorbed, escaped), recip, int(matrix_bytes), store, [], balanced)
 
 
 def _solve_matrix_free(ff, nodes, settings, monitor):

@@ -21,6 +21,7 @@ import numpy as np
 
 from .constants import tol
 from .geometry import ragged
+from .parallel import share_rays
 
 #: Triangles per leaf at most. Larger leaves mean fewer wavefront levels (each level costs a few
 #: NumPy calls over all pairs) but more ray-triangle tests. Measured on room_with_boxes(2000)
@@ -326,11 +327,19 @@ def closest_hit(bvh, origins, directions, t_max=np.inf):
         ``t`` go to the lowest index.
     """
     o, d, dn, tm = _check_rays(bvh, origins, directions, t_max)
+    shared = share_rays(bvh, o, d, dn, tm, False)
+    return cast(bvh, o, d, dn, tm, False) if shared is None else shared
+
+
+def cast(bvh, o, d, dn, t_max, any_mode):
+    """(t, original triangle or -1) of checked rays, RAY_CHUNK at a time; with ``any_mode``,
+    the triangle is any one hit (t then is not the closest). Each ray's answer depends on that
+    ray alone: what :func:`core.parallel.share_rays` relies on."""
     t_out = np.full(o.shape[0], np.inf)
     tri_out = np.full(o.shape[0], -1, dtype=np.int64)
     for a in range(0, o.shape[0], RAY_CHUNK):
         b = a + RAY_CHUNK
-        t, tri = _traverse(bvh, o[a:b], d[a:b], dn[a:b], tm[a:b], any_mode=False)
+        t, tri = _traverse(bvh, o[a:b], d[a:b], dn[a:b], t_max[a:b], any_mode=any_mode)
         hit = tri >= 0
         t_out[a:b][hit] = t[hit]
         tri_out[a:b][hit] = tri[hit]
@@ -347,9 +356,5 @@ def any_hit(bvh, origins, directions, t_max=np.inf):
     (N,) bool
     """
     o, d, dn, tm = _check_rays(bvh, origins, directions, t_max)
-    out = np.zeros(o.shape[0], dtype=bool)
-    for a in range(0, o.shape[0], RAY_CHUNK):
-        b = a + RAY_CHUNK
-        _, tri = _traverse(bvh, o[a:b], d[a:b], dn[a:b], tm[a:b], any_mode=True)
-        out[a:b] = tri >= 0
-    return out
+    shared = share_rays(bvh, o, d, dn, tm, True)
+    return (cast(bvh, o, d, dn, tm, True) if shared is None else shared)[1] >= 0

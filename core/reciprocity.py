@@ -5,9 +5,16 @@ different sizes disagree about their exchange, and the energy balance shows it.
 :func:`make_reciprocal` makes ``A_i F_ij = A_j F_ji`` exact while keeping every row's sum
 (symmetric Sinkhorn scaling), so a closed scene still passes the white furnace test.
 
+The scaling depends on the form factors and the areas only: :func:`make_reciprocal` returns it
+as a :class:`Balance` if asked, and :func:`rebalance` rebuilds the same reciprocal matrix (bit
+for bit) from the same ``F`` without the Sinkhorn iterations: a relight with a new emission or
+reflectance skips them.
+
 Every block loop polls the monitor, so a cancel is honoured within a poll interval even on a
 matrix of thousands of nodes.
 """
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -43,8 +50,37 @@ def asymmetry(F, areas, monitor=None):
     return num / den if den > 0 else 0.0
 
 
+@dataclass(frozen=True)
+class Balance:
+    """The scaling :func:`make_reciprocal` found for one matrix: :func:`rebalance` applies it
+    again.
+
+    Attributes
+    ----------
+    scales : (n,) float64
+        Sinkhorn scales ``d``: ``F_rec_ij = S_ij d_i d_j / A_i`` (S the blend of the pair's two
+        estimates); zero for nodes without a row sum to restore.
+    unscaled : (U,) int64
+        Nodes that keep their own rows and columns of ``F``.
+    dtype : numpy.dtype
+        The matrix's: the blend and the scaling round in it.
+    info : dict
+        What :func:`make_reciprocal` reports.
+    """
+
+    scales: np.ndarray
+    unscaled: np.ndarray
+    dtype: np.dtype
+    info: dict
+
+    @property
+    def nbytes(self):
+        """Bytes of the arrays kept (8 per node and per unscaled node)."""
+        return int(self.scales.nbytes + self.unscaled.nbytes)
+
+
 def make_reciprocal(F, areas, *, tol=RECIPROCITY_TOL, max_iterations=RECIPROCITY_MAX_ITERATIONS,
-                    monitor=None):
+                    monitor=None, return_balance=False):
     """Reciprocal form factors with the row sums of ``F``.
 
     Each pair has two estimates of its exchange ``A_i F_ij``: one from i's hemicube (or rays),
@@ -70,6 +106,9 @@ def make_reciprocal(F, areas, *, tol=RECIPROCITY_TOL, max_iterations=RECIPROCITY
         ``asymmetry_before`` (see :func:`asymmetry`), ``sinkhorn_iterations`` (of the last
         pass), ``row_sum_error`` (largest relative error left), ``unscaled`` (nodes left with
         their own rows and columns).
+    balance : Balance
+        Only with ``return_balance=True``: the scaling found, for :func:`rebalance` to rebuild
+        ``F_rec`` from the same ``F`` without iterating (a relight).
     """
     F = np.asarray(F)
     areas = np.asarray(areas, dtype=np.float64)
@@ -81,13 +120,7 @@ def make_reciprocal(F, areas, *, tol=RECIPROCITY_TOL, max_iterations=RECIPROCITY
     info = dict(asymmetry_before=asymmetry(F, areas, monitor))
     row_sum = F.sum(axis=1, dtype=np.float64)
     target = areas * row_sum
-    S = np.empty_like(F)
-    a = areas.astype(F.dtype)
-    for s in range(0, n, _BLOCK):
-        e = min(s + _BLOCK, n)
-        ai = a[s:e, None]
-        S[s:e] = ai * a[None, :] * (F[s:e] + F[:, s:e].T) / (ai + a[None, :])
-        poll(monitor, "making form factors reciprocal")
+    S = _blend(F, areas, None, None, np.empty_like(F), monitor)
     # Nodes that cannot be balanced keep their own rows and columns: nodes without a partner
     # (their row hits only nodes that see nothing), and groups whose row sums cannot all be met by
     # a symmetric scaling: two sets of patches shut inside a solid, each seeing mostly through the
@@ -113,17 +146,81 @@ def make_reciprocal(F, areas, *, tol=RECIPROCITY_TOL, max_iterations=RECIPROCITY
         S[:, idx] = 0
         target = areas * (row_sum - F[:, idx].sum(axis=1, dtype=np.float64))
         target[idx] = 0.0
-    for s in range(0, n, _BLOCK):
-        e = min(s + _BLOCK, n)
-        S[s:e] *= (d[s:e] / areas[s:e])[:, None].astype(S.dtype) * d[None, :].astype(S.dtype)
-        poll(monitor, "making form factors reciprocal")
     idx = np.flatnonzero(unscaled)
-    if idx.size:
-        S[idx] = F[idx]
-        S[:, idx] = F[:, idx]
     err = float(np.max(err[live])) if live.any() else 0.0
     info.update(sinkhorn_iterations=it, row_sum_error=err, unscaled=int(idx.size))
-    return S, info
+    found = Balance(d, idx, F.dtype, dict(info))
+    # S holds the blend with the unscaled nodes cut out: the scaled matrix is made again from F,
+    # by the very code a relight runs, so the two agree bit for bit.
+    S = rebalance(F, areas, found, out=S, monitor=monitor)
+    return (S, info, found) if return_balance else (S, info)
+
+
+def rebalance(F, areas, found, *, out=None, monitor=None):
+    """The reciprocal matrix of ``F`` with the scaling ``found`` (the :class:`Balance` that
+    :func:`make_reciprocal` returned for this same ``F`` and ``areas``): what it returned, bit
+    for bit, in one pass over the matrix and without iterating.
+
+    ``out`` : (n, n) array of ``F``'s dtype, optional; may be ``F`` itself (made reciprocal in
+    place: no second matrix in memory).
+    """
+    F = np.asarray(F)
+    areas = np.asarray(areas, dtype=np.float64)
+    n = F.shape[0]
+    if not isinstance(found, Balance):
+        raise TypeError(f"found must be a Balance; got {type(found).__name__}")
+    if F.ndim != 2 or F.shape[1] != n or F.dtype != found.dtype:
+        raise ValueError(f"F must be square (n, n) of dtype {found.dtype}; got {F.shape} "
+                         f"{F.dtype}")
+    if areas.shape != (n,) or found.scales.shape != (n,):
+        raise ValueError(f"areas and found.scales must have shape ({n},); got {areas.shape} and "
+                         f"{found.scales.shape}")
+    if out is None:
+        out = np.empty_like(F)
+    elif out.shape != F.shape or out.dtype != F.dtype:
+        raise ValueError(f"out must have shape {F.shape} and dtype {F.dtype}; got {out.shape} "
+                         f"{out.dtype}")
+    idx = found.unscaled
+    keep = None
+    if idx.size:         # their own rows and columns, saved before out (maybe F) is written
+        keep = F[idx].copy(), F[:, idx].copy()
+    d = found.scales
+    _blend(F, areas, d / areas, d, out, monitor)
+    if keep is not None:
+        out[idx] = keep[0]
+        out[:, idx] = keep[1]
+    return out
+
+
+def _blend(F, areas, row_scale, col_scale, out, monitor):
+    """``out_ij = S_ij w_ij``, the blend ``S_ij = A_i A_j (F_ij + F_ji) / (A_i + A_j)`` scaled
+    by ``w_ij = row_scale_i col_scale_j`` (both rounded to F's dtype first; None: unscaled).
+    ``out`` may be ``F``: each pair of blocks (I, J), (J, I) is read before either is written,
+    S being symmetric bit for bit (IEEE sums and products commute)."""
+    n = F.shape[0]
+    dt = F.dtype
+    a = areas.astype(dt)
+    scaled = row_scale is not None
+    if scaled:
+        r, c = row_scale.astype(dt), col_scale.astype(dt)
+    for s in range(0, n, _BLOCK):
+        e = min(s + _BLOCK, n)
+        ai = a[s:e, None]
+        for s2 in range(s, n, _BLOCK):
+            e2 = min(s2 + _BLOCK, n)
+            aj = a[None, s2:e2]
+            S = ai * aj
+            S *= F[s:e, s2:e2] + F[s2:e2, s:e].T
+            S /= ai + aj
+            if not scaled:
+                out[s2:e2, s:e] = S.T
+                out[s:e, s2:e2] = S
+            else:
+                if s2 > s:
+                    np.multiply(S.T, r[s2:e2, None] * c[None, s:e], out=out[s2:e2, s:e])
+                np.multiply(S, r[s:e, None] * c[None, s2:e2], out=out[s:e, s2:e2])
+            poll(monitor, "making form factors reciprocal")
+    return out
 
 
 def _sinkhorn(S, target, live, tol, max_iterations, monitor):

@@ -112,9 +112,11 @@ def build_parser(need_input):
     p.add_argument("--group-strength", action="append", default=[], type=_group_strength,
                    metavar="NAME=FACTOR",
                    help="after the bake, multiply light group NAME's light by FACTOR before "
-                        "saving (repeatable; groups: each emissive material, 'Lights' for the "
-                        "point, spot and sun lights, or Blender's light groups; the report "
-                        "lists them). A weighted sum of one solve per group: no new bake")
+                        "saving (repeatable; groups: each emissive material, each point, spot "
+                        "and sun light by its object's name, 'World', or Blender's light "
+                        "groups; on the radiosity mesh the lights and the world are one group, "
+                        "'Lights'; the report lists them). A weighted sum of each group's own "
+                        "solution (one solve or cast per group): no new bake")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="run the bake's hemicube calls on a Dask distributed cluster: a "
                         "scheduler's address (tcp://host:8786), a scheduler file (.json, on "

@@ -23,6 +23,7 @@ import numpy as np
 from ..core import falsecolour, legend
 from .extract import LUX_ATTRIBUTE, LUX_COLOUR_ATTRIBUTE as LUX_COLOUR
 from .props import from_blender
+from .write import write_corner_colours
 
 #: Mesh custom property: {'active': name, 'default': name} of the colour attributes before.
 PROP_PREVIOUS = "radiosity_lux_previous"
@@ -174,18 +175,7 @@ def _write(mesh, colours):
     if PROP_PREVIOUS not in mesh:
         mesh[PROP_PREVIOUS] = {"active": attrs.active_color_name or "",
                                "default": attrs.default_color_name or ""}
-    attr = attrs.get(LUX_COLOUR)
-    if attr is not None and (attr.data_type != "BYTE_COLOR" or attr.domain != "CORNER"):
-        attrs.remove(attr)
-        attr = None
-    if attr is None:
-        attr = attrs.new(LUX_COLOUR, "BYTE_COLOR", "CORNER")
-    rgba = np.ones((colours.shape[0], 4), dtype=np.float32)
-    rgba[:, :3] = colours
-    attr.data.foreach_set("color_srgb", rgba.ravel())
-    attrs.active_color_name = LUX_COLOUR
-    attrs.default_color_name = LUX_COLOUR
-    mesh.update()
+    write_corner_colours(mesh, LUX_COLOUR, "BYTE_COLOR", colours)
 
 
 def _restore(mesh):

@@ -11,13 +11,18 @@ again.
   strength and colour and the point, spot and sun lights changed, it stops (bake again). New
   emission goes through ``core.relight`` (a new solve on the kept form factors). The lights'
   direct light is kept summed in the bake: lights scaled alike (one factor per colour channel)
-  add the lights' own solution (``core.relight`` with no emission) times the factor - 1, no
-  shadow ray; lights changed apart, moved, added or removed are cast again
-  (``core.relight(lights=)``: shadow rays and gathers again, the form factors kept).
-* **Light groups** (:func:`mix`): the solve is linear in the light, so one solution per group
-  (each emissive material, and the lights with the world) is kept, and a group's strength and
-  tint make the written colours a weighted sum with no solve. Blender's light groups
-  (``Object.lightgroup``) merge what they hold into one group.
+  add the lights' own solution times the factor - 1, no shadow ray; lights changed apart,
+  moved, added or removed are cast again (``core.relight(lights=)``: shadow rays and gathers
+  again, the form factors kept).
+* **Light groups** (:func:`mix`): the solve is linear in the light, so a mix is the light with
+  every group at 1 plus each weighted group's own solution times (its weight - 1), no solve
+  once that solution is kept. A group is each emissive material (area lights are emissive
+  polygons), each point, spot and sun light (named after its object) and the world ("World");
+  Blender's light groups (``Object.lightgroup``, ``World.lightgroup``) merge what they hold. A
+  group's own solution is made when it is first weighted: a solve for a material, a cast of
+  that light alone for a light (``core.relight(lights=)``), a cast with no light for the world.
+  On the radiosity mesh ('mesh' output) such a cast meshes again (the core keeps the lights'
+  direct light summed at the mesh's points), so there the lights and the world stay one group.
 
 The colours are written by ``job.apply``, exactly as a bake writes them.
 """
@@ -34,13 +39,11 @@ from .. import core
 from ..core.errors import RadiosityError
 from . import job, surfaces
 from .extract import ATTRIBUTE, extract
+from .light_units import Solution, units as light_units
 
 #: Two values of a re-read scene are "unchanged" within this relative difference (float32 at the
 #: Blender boundary; the lights' factor is one per colour channel for all of them).
 SAME_RTOL = 1e-5
-
-#: Group name of the point, spot and sun lights (with the world, if any) outside a light group.
-LIGHTS = "Lights"
 
 #: What the user is told whenever the kept bake cannot serve.
 BAKE_AGAIN = "bake again"
@@ -54,67 +57,24 @@ class RelightError(job.BakeError):
 
 
 @dataclass
-class Solution:
-    """Light of one bake, linear in the emission: the arrays job.apply writes.
-
-    corner, incident : (C, 3) float64 (incident may be None); mesh_corner, mesh_incident :
-    (C_out, 3) float64 or None (radiosity mesh output); surfaces : one (S, 3) float64 per
-    calculation surface (``surfaces.incident``: its grid points, then its vertices).
-    """
-
-    corner: np.ndarray
-    incident: np.ndarray = None
-    mesh_corner: np.ndarray = None
-    mesh_incident: np.ndarray = None
-    surfaces: tuple = ()
-
-    @classmethod
-    def of(cls, result, calc_surfaces=()):
-        out = result.output
-        return cls(result.corner_colours, result.corner_incident,
-                   None if out is None else out.corner_colours,
-                   None if out is None else out.corner_incident,
-                   tuple(surfaces.incident(result, surf) for surf in calc_surfaces))
-
-    def combine(self, other, weight=1.0, own=1.0):
-        """``own * self + weight * other``; weights scalar or (3,)."""
-        def mix(a, b):
-            if a is None or b is None:
-                return None
-            return own * a + weight * b
-        return Solution(mix(self.corner, other.corner), mix(self.incident, other.incident),
-                        mix(self.mesh_corner, other.mesh_corner),
-                        mix(self.mesh_incident, other.mesh_incident),
-                        tuple(mix(a, b) for a, b in zip(self.surfaces, other.surfaces)))
-
-    def scaled(self, weight):
-        return self.combine(self, weight, own=0.0)
-
-    def as_result(self, template):
-        """A BakeResult like ``template`` (report, mesh) with these colours."""
-        output = template.output
-        if output is not None:
-            output = replace(output, corner_colours=self.mesh_corner,
-                             corner_incident=self.mesh_incident)
-        return replace(template, corner_colours=self.corner, corner_incident=self.incident,
-                       output=output)
-
-
-@dataclass
 class Kept:
     """What relight needs from the last bake of a scene (see the module docstring)."""
 
     bake_input: object           # job.BakeInput of the bake (extraction: where colours go)
     result: object               # core.BakeResult of the bake: the kept form factors
     selected_only: bool
-    units: list                  # [(group name, material indices or None for the lights)]
+    units: list                  # [Unit]: the sources of light; units of one name, one group
     emission: np.ndarray         # (M, 3) the emission of the written light
     back_emission: np.ndarray    # (M, 3) or None
     lights_ref: object = None    # core Lights that ``result`` was lit by (the bake's, or relit)
     lights_factor: np.ndarray = field(default_factory=lambda: np.ones(3))
     template: object = None      # the last relit core.BakeResult (report, mesh)
-    lights: Solution = None      # the lights' (and world's) own solution, at the bake's power
-    basis: dict = None           # unit index -> Solution at ``emission``, ``lights_factor``
+    full: Solution = None        # the light written with every group at 1
+    lit: Solution = None         # the lights' and world's solution, at ``lights_ref``'s power
+    world: Solution = None       # the world's alone (a cast with no light; 'vertices' output)
+    own: dict = field(default_factory=dict)    # unit index -> its lights alone, ``lights_ref``
+    basis: dict = field(default_factory=dict)  # unit index -> its Solution at ``emission``,
+    #                                            ``lights_factor`` (made when first weighted)
     seconds: dict = field(default_factory=dict)
     kept_mb: float = 0.0         # kept_bytes at keep time (the panel shows it)
 
@@ -127,12 +87,13 @@ def kept(scene):
 def keep(scene, bake_input, result):
     """Keep a bake for relight and list its light groups on the scene (after job.apply)."""
     arrays = bake_input.scene
-    units = _units(bake_input)
+    units = light_units(bake_input, scene)
     _KEPT[scene.session_uid] = Kept(
         bake_input, result, bool(scene.radiosity.selected_only), units,
         np.array(arrays.emission), None if arrays.back_emission is None
-        else np.array(arrays.back_emission), lights_ref=arrays.lights, template=result)
-    _set_groups(scene, [name for name, _ in units])
+        else np.array(arrays.back_emission), lights_ref=arrays.lights, template=result,
+        full=Solution.of(result, bake_input.extraction.surfaces))
+    _ops().set_groups(scene, [u.group for u in units])
     entry = _KEPT[scene.session_uid]
     size = kept_bytes(entry)
     entry.kept_mb = size / 2 ** 20
@@ -157,7 +118,7 @@ def drop(scene=None):
         return
     _KEPT.pop(scene.session_uid, None)
     if hasattr(scene, "radiosity_groups"):
-        _set_groups(scene, [])
+        _ops().set_groups(scene, [])
 
 
 def kept_bytes(entry):
@@ -191,47 +152,9 @@ def kept_bytes(entry):
 # ----------------------------------------------------------------------------- groups
 
 
-def _units(bake_input, lights=False):
-    """[(group name, materials)]: every emissive material, then the lights and world (None).
-
-    An emissive material whose objects all sit in one Blender light group, and lights that all
-    sit in one, take that group's name; units of one name form one group. ``lights``: the
-    point, spot and sun lights now (default: the bake's)."""
-    scene, arrays = bake_input.scene, bake_input.extraction.arrays
-    if lights is not False:
-        scene = replace(scene, lights=lights)
-    mats = np.asarray(scene.face_materials)
-    emits = np.any(np.asarray(scene.emission) > 0, axis=1)
-    if scene.back_emission is not None:
-        emits |= np.any(np.asarray(scene.back_emission) > 0, axis=1)
-    names = arrays.get("material_names") or ()
-    objects = np.asarray(arrays.get("face_objects", np.zeros(mats.size, np.int64)))
-    object_names = arrays.get("object_names") or ()
-    units = []
-    for m in np.flatnonzero(emits):
-        on = mats == m
-        if not on.any():
-            continue
-        owners = {object_names[i] for i in np.unique(objects[on]) if i < len(object_names)}
-        name = names[m] if m < len(names) else f"Material {m}"
-        units.append((_lightgroup(owners) or name, np.array([m])))
-    lights = scene.lights
-    if (lights is not None and lights.shines) or scene.world is not None:
-        owners = set(lights.names) if lights is not None and lights.shines else set()
-        group = _lightgroup(owners) if owners and scene.world is None else ""
-        units.append((group or (LIGHTS if scene.world is None else "Lights and World"), None))
-    return units
-
-
-def _lightgroup(object_names):
-    """The Blender light group that all these objects share, or ''."""
-    groups = {getattr(bpy.data.objects.get(n), "lightgroup", "") or "" for n in object_names}
-    return groups.pop() if len(groups) == 1 else ""
-
-
 def group_names(entry):
     """Group names in order, each once."""
-    return list(dict.fromkeys(name for name, _ in entry.units))
+    return list(dict.fromkeys(u.group for u in entry.units))
 
 
 _QUIET = [False]
@@ -251,40 +174,14 @@ def is_quiet():
     return _QUIET[0]
 
 
-def _set_groups(scene, names, keep_values=False):
-    """Make the scene's group list ``names`` (strength and tint 1, or as they were). An empty
-    list leaves no trace in the scene's data (Clear Bake restores it exactly): the stored
-    property is removed."""
-    if not names and not keep_values:
-        groups = scene.radiosity_groups
-        if len(groups):
-            with quiet():
-                groups.clear()
-        if "radiosity_groups" in scene.keys():       # Blender 4.x keeps it as an ID property
-            del scene["radiosity_groups"]
-        return
-    with quiet():
-        groups = scene.radiosity_groups
-        was = {g.name: (g.strength, tuple(g.tint)) for g in groups} if keep_values else {}
-        groups.clear()
-        for name in dict.fromkeys(names):
-            item = groups.add()
-            item.name = name
-            if name in was:
-                item.strength, item.tint = was[name]
+def _ops():
+    """radiosity_addon.relight_ops, which holds the scene's group list (and imports us)."""
+    from . import relight_ops
+    return relight_ops
 
 
 def _weights(scene, entry):
-    """(3,) weight per group name: strength x tint."""
-    out = {name: np.ones(3) for name in group_names(entry)}
-    for item in scene.radiosity_groups:
-        if item.name in out:
-            out[item.name] = item.strength * np.array(item.tint[:3], dtype=np.float64)
-    return out
-
-
-def _all_one(weights):
-    return all(np.array_equal(w, np.ones(3)) for w in weights.values())
+    return _ops().weights(scene, group_names(entry))
 
 
 # ----------------------------------------------------------------------------- solving
@@ -303,52 +200,109 @@ def _relit(entry, emission, back_emission, lights=None):
         raise RelightError(f"Relight failed: {exc}") from exc
 
 
-def _lights_solution(entry):
-    """The lights' (and world's) own solution at the bake's power (computed once)."""
-    if entry.lights is None:
-        M = entry.emission.shape[0]
+def _lit(entry):
+    """The lights' and world's solution at ``lights_ref``'s power, no emission (computed once:
+    one solve, their direct light is kept in the bake)."""
+    if entry.lit is None:
         t0 = time.perf_counter()
-        zero = None if entry.back_emission is None else np.zeros((M, 3))
-        entry.lights = Solution.of(_relit(entry, np.zeros((M, 3)), zero), _surfaces(entry))
+        entry.lit = Solution.of(_relit(entry, *_dark(entry)), _surfaces(entry))
         entry.seconds["lights_solution"] = time.perf_counter() - t0
-    return entry.lights
+    return entry.lit
+
+
+def _dark(entry):
+    """(emission, back emission or None) of no emissive material."""
+    M = entry.emission.shape[0]
+    return np.zeros((M, 3)), None if entry.back_emission is None else np.zeros((M, 3))
+
+
+def _alone(lights, index):
+    """Core Lights ``lights`` with every light but ``index`` at power 0 (they then cast no
+    shadow ray: core.lights.CULL); None for no lights."""
+    if lights is None:
+        return None
+    on = np.isin(np.arange(len(lights)), index)[:, None]
+    n = lights.n_points
+    return replace(lights, intensity=np.where(on[:n], lights.intensity, 0.0),
+                   sun_irradiance=np.where(on[n:], lights.sun_irradiance, 0.0))
+
+
+def _cast(entry, index):
+    """The solution of the kept lights ``index`` alone with the world (if any), no emission,
+    cast again (``core.relight(lights=)``: shadow rays and gathers; the form factors kept)."""
+    relit = _relit(entry, *_dark(entry), lights=_alone(entry.lights_ref, index))
+    _same_mesh(entry, relit)
+    return Solution.of(relit, _surfaces(entry))
+
+
+def _world(entry):
+    """The world's own solution (a cast with no light; computed once), or None without one."""
+    if entry.world is None and entry.bake_input.scene.world is not None:
+        t0 = time.perf_counter()
+        entry.world = _cast(entry, ())
+        entry.seconds["world_solution"] = time.perf_counter() - t0
+    return entry.world
+
+
+def _lights_only(entry):
+    """The point, spot and sun lights' solution at ``lights_ref``'s power, without the world."""
+    world = _world(entry)
+    return _lit(entry) if world is None else _lit(entry).combine(world, -1.0)
 
 
 def _surfaces(entry):
     return entry.bake_input.extraction.surfaces
 
 
-def _has_lights(entry):
-    return any(mats is None for _, mats in entry.units)
-
-
-def _basis(entry):
-    """One Solution per unit at the current emission and lights factor (computed once each)."""
-    if entry.basis is not None:
-        return entry.basis
+def _unit(entry, k):
+    """Unit k's own Solution at the current emission and lights factor, or None (dark): made
+    when its group is first weighted (a solve for emissive materials, a cast for lights), then
+    kept until the next Relight."""
+    if k in entry.basis:
+        return entry.basis[k]
     t0 = time.perf_counter()
-    basis = {}
-    lights = _lights_solution(entry) if _has_lights(entry) else None
-    for k, (_, mats) in enumerate(entry.units):
-        if mats is None:
-            basis[k] = lights.scaled(entry.lights_factor)
-            continue
-        only = np.zeros_like(entry.emission)
-        only[mats] = entry.emission[mats]
-        back = None
-        if entry.back_emission is not None:
-            back = np.zeros_like(entry.back_emission)
-            back[mats] = entry.back_emission[mats]
-        if not only.any() and (back is None or not back.any()):
-            basis[k] = None                    # dark at the current emission
-            continue
-        relit = _relit(entry, only, back)
-        _same_mesh(entry, relit)
-        sol = Solution.of(relit, _surfaces(entry))
-        basis[k] = sol if lights is None else sol.combine(lights, -1.0)
-    entry.basis = basis
-    entry.seconds["groups"] = time.perf_counter() - t0
-    return basis
+    unit, sol = entry.units[k], None
+    if unit.materials is not None:
+        only, back = _dark(entry)
+        only[unit.materials] = entry.emission[unit.materials]
+        if back is not None:
+            back[unit.materials] = entry.back_emission[unit.materials]
+        if only.any() or (back is not None and back.any()):
+            relit = _relit(entry, only, back)
+            _same_mesh(entry, relit)
+            sol = Solution.of(relit, _surfaces(entry))
+            if any(u.materials is None for u in entry.units):
+                sol = sol.combine(_lit(entry), -1.0)        # the lights shine in that solve
+    elif [j for j, u in enumerate(entry.units) if u.materials is None] == [k] \
+            and np.array_equal(entry.lights_factor, np.ones(3)):
+        sol = _lit(entry)                                   # every light and the world
+    else:
+        if unit.lights:
+            sol = _own(entry, k).scaled(entry.lights_factor)
+        if unit.world:
+            sol = _world(entry) if sol is None else sol.combine(_world(entry))
+    entry.basis[k] = sol
+    entry.seconds[f"group {unit.group}"] = time.perf_counter() - t0
+    return sol
+
+
+def _own(entry, k):
+    """The lights of unit k alone, without the world, at ``lights_ref``'s power (kept until
+    they are cast again): cast alone, or, once every other unit of lights has its own, the
+    rest of the lights' solution (no cast; it then also carries what the core's light culling,
+    core.lights.CULL, gave the others where they were culled and hidden)."""
+    if k not in entry.own:
+        others = [j for j, u in enumerate(entry.units) if u.materials is None and u.lights
+                  and j != k]
+        if all(j in entry.own for j in others):
+            sol = _lights_only(entry)
+            for j in others:
+                sol = sol.combine(entry.own[j], -1.0)
+        else:
+            sol, world = _cast(entry, entry.units[k].lights), _world(entry)
+            sol = sol if world is None else sol.combine(world, -1.0)
+        entry.own[k] = sol
+    return entry.own[k]
 
 
 def _same_mesh(entry, relit):
@@ -363,15 +317,14 @@ def _same_mesh(entry, relit):
 
 
 def _mixed(entry, weights):
-    """The written Solution: the groups' solutions weighted."""
-    total = None
-    for k, sol in _basis(entry).items():
-        if sol is None:
-            continue
-        w = weights[entry.units[k][0]]
-        total = sol.scaled(w) if total is None else total.combine(sol, w)
-    if total is None:
-        raise RelightError(f"Light groups: nothing in the scene gives light; {BAKE_AGAIN}")
+    """The written Solution: the light with every group at 1, plus each weighted group's own
+    solution times (its weight - 1)."""
+    total = entry.full
+    for k, unit in enumerate(entry.units):
+        w = weights[unit.group]
+        if not np.array_equal(w, np.ones(3)):
+            sol = _unit(entry, k)
+            total = total if sol is None else total.combine(sol, w - 1.0)
     return total
 
 
@@ -498,33 +451,36 @@ def relight(context):
     _check_baked(scene, entry)
     t0 = time.perf_counter()
     emission, back, lights, factor = _read(context, entry)
-    weights = _weights(scene, entry)
+    if factor is not None and not np.array_equal(factor, np.ones(3)) \
+            and entry.bake_input.scene.world is not None \
+            and entry.bake_input.settings.output_mode == "mesh":
+        factor = None              # the world cannot leave the lights' solution on this mesh
+        lights = _alone(entry.lights_ref, ()) if lights is None else lights
     before = dict(vars(entry))
     try:
         if factor is None:         # lights moved, added or changed apart: cast them again
             relit = _relit(entry, emission, back, lights)
             entry.result = entry.template = relit
-            entry.lights_ref, entry.lights, factor = lights, None, np.ones(3)
-            solution = Solution.of(relit, _surfaces(entry))
-            entry.units = _units(entry.bake_input, lights)
-        elif _all_one(weights):    # one solve: the scene's light as it is now
+            entry.lights_ref, entry.lit, entry.world, factor = lights, None, None, np.ones(3)
+            entry.own, solution = {}, Solution.of(relit, _surfaces(entry))
+            entry.units = light_units(entry.bake_input, scene, lights)
+        else:                      # one solve: the scene's light as it is now
             relit = _relit(entry, emission, back)
             scaled = not np.array_equal(factor, np.ones(3))
             _same_mesh_or_new(entry, relit, scaled)
             solution = Solution.of(relit, _surfaces(entry))
             if scaled:
-                solution = solution.combine(_lights_solution(entry), factor - 1.0)
+                solution = solution.combine(_lights_only(entry), factor - 1.0)
             entry.template = relit
         entry.emission, entry.back_emission, entry.lights_factor = emission, back, factor
-        entry.basis = None
-        if not _all_one(weights):  # the groups' solutions at the new light, mixed
-            solution = _mixed(entry, weights)
+        entry.full, entry.basis = solution, {}
+        solution = _mixed(entry, _weights(scene, entry))  # a group new since a cast is at 1
         report = _write(context, entry, solution, time.perf_counter() - t0)
     except BaseException:          # nothing was written: the kept bake stays as it was
         vars(entry).update(before)
         raise
     if group_names(entry) != [g.name for g in scene.radiosity_groups]:
-        _set_groups(scene, group_names(entry), keep_values=True)
+        _ops().set_groups(scene, group_names(entry), keep_values=True)
     return report
 
 
@@ -551,7 +507,7 @@ def _same_mesh_or_new(entry, relit, scaled):
         if scaled:
             raise RelightError("Relight: the emitters were meshed again (exact emitters), so "
                                f"the lights' power cannot be scaled with them; {BAKE_AGAIN}")
-        entry.lights = None
+        entry.lit, entry.world, entry.own = None, None, {}
 
 
 def mix(context):

@@ -1,13 +1,16 @@
 """Relight in the panel: the Relight operator, the light groups' properties and their list.
 
 The work is in :mod:`radiosity_addon.relight`; this module is what the user touches. Each group
-(``Scene.radiosity_groups``) has a strength and a tint; changing either writes the groups'
-weighted sum at once (no solve once the groups' solutions are kept).
+(``Scene.radiosity_groups``: each emissive material, point, spot and sun light, the world, or a
+Blender light group) has a strength and a tint; changing either writes the groups' weighted sum
+at once (no solve once the groups' solutions are kept). :func:`set_groups` fills the list,
+:func:`weights` reads it.
 """
 
 import traceback
 
 import bpy
+import numpy as np
 from bpy.app.handlers import persistent
 
 from . import job, relight
@@ -33,6 +36,38 @@ def _group_changed(self, context):
     except Exception as exc:  # a bug: keep the traceback in the console, the UI alive
         traceback.print_exc()
         _ERRORS[scene.session_uid] = f"Light groups failed ({type(exc).__name__}): {exc}"
+
+
+def set_groups(scene, names, keep_values=False):
+    """Make the scene's group list ``names`` (strength and tint 1, or as they were). An empty
+    list leaves no trace in the scene's data (Clear Bake restores it exactly): the stored
+    property is removed."""
+    if not names and not keep_values:
+        groups = scene.radiosity_groups
+        if len(groups):
+            with relight.quiet():
+                groups.clear()
+        if "radiosity_groups" in scene.keys():       # Blender 4.x keeps it as an ID property
+            del scene["radiosity_groups"]
+        return
+    with relight.quiet():
+        groups = scene.radiosity_groups
+        was = {g.name: (g.strength, tuple(g.tint)) for g in groups} if keep_values else {}
+        groups.clear()
+        for name in dict.fromkeys(names):
+            item = groups.add()
+            item.name = name
+            if name in was:
+                item.strength, item.tint = was[name]
+
+
+def weights(scene, names):
+    """{group name: (3,) float64 strength x tint} for ``names`` (1 where the list has none)."""
+    out = {name: np.ones(3) for name in names}
+    for item in scene.radiosity_groups:
+        if item.name in out:
+            out[item.name] = item.strength * np.array(item.tint[:3], dtype=np.float64)
+    return out
 
 
 class RADIOSITY_PG_group(bpy.types.PropertyGroup):

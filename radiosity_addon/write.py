@@ -265,18 +265,25 @@ def write_attribute(mesh, colours):
     if colours.shape != (len(mesh.loops), 3):
         raise WriteError(f"colours for mesh '{mesh.name}' must have shape "
                          f"({len(mesh.loops)}, 3); got {colours.shape}")
+    write_corner_colours(mesh, ATTRIBUTE, "FLOAT_COLOR", colours)
+
+
+def write_corner_colours(mesh, name, data_type, colours):
+    """(C, 3) colours as the CORNER colour attribute ``name`` of type ``data_type``
+    ('FLOAT_COLOR': linear; 'BYTE_COLOR': the values are sRGB), replacing an attribute of that
+    name with another type or domain; made the active and the render colour."""
     attrs = mesh.color_attributes
-    attr = attrs.get(ATTRIBUTE)
-    if attr is not None and (attr.data_type != "FLOAT_COLOR" or attr.domain != "CORNER"):
+    attr = attrs.get(name)
+    if attr is not None and (attr.data_type != data_type or attr.domain != "CORNER"):
         attrs.remove(attr)
         attr = None
     if attr is None:
-        attr = attrs.new(ATTRIBUTE, "FLOAT_COLOR", "CORNER")
+        attr = attrs.new(name, data_type, "CORNER")
     rgba = np.ones((colours.shape[0], 4), dtype=np.float32)
     rgba[:, :3] = colours
-    attr.data.foreach_set("color", rgba.ravel())
-    attrs.active_color = attr
-    attrs.render_color_index = attrs.find(ATTRIBUTE)
+    attr.data.foreach_set("color" if data_type == "FLOAT_COLOR" else "color_srgb", rgba.ravel())
+    attrs.active_color_name = name
+    attrs.default_color_name = name
     mesh.update()
 
 

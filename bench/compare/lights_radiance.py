@@ -17,15 +17,27 @@ The room and lights of :mod:`bench.compare.lights`, written as a .rad file
 * ``point``: each point light as a Radiance ``light`` sphere of its radius whose radiance gives
   its intensity (``I = L pi r^2``); ours keeps the soft falloff ``1 / (d^2 + r^2)`` (Cycles'),
   Radiance's sphere the exact ``1 / d^2``: 2.7 % apart on the ceiling right above a bulb.
+* ``spot``: the spot on the table and the dim fill light of :mod:`bench.compare.lights`. The
+  spot is a Radiance ``light`` sphere of its radius, as a point light of its power, whose
+  radiance a ``brightfunc`` (:data:`SPOT_CAL`) multiplies by our cone (core.lights.spot_factor,
+  measured against Cycles in tests/addon/test_lights.py): ``smoothstep((cos a - cos(size / 2))
+  / ((1 - cos(size / 2)) x blend))``, a the angle between the spot's axis and the direction
+  leaving the light, so both programs shine the same distribution and the comparison is of the
+  light's transport. 40 more
+  sensors on the table top and 34 on the floor beside it, through the cone's edge and blend,
+  where the direct light alone is compared too (Radiance ``-ab 0``; ours one shadow ray to the
+  light's centre, as Radiance's ``-ds 0``).
 
 Sensors: 48 points on the ceiling (facing down) and 60 on two walls (facing in), none of them in
-direct light of the sun. Ours: a hemicube (R = 256) at the same points over a uniform 0.25 m bake's solved
-patches, plus the lights' direct light and the world's uncovered part (``DirectLight.extra``).
+direct light of the sun. Ours: a hemicube (R = 256) at the same points over a uniform 0.25 m
+bake's solved patches, plus the lights' direct light and the world's uncovered part
+(``DirectLight.extra``).
 Radiance: ``-ab 10 -ad 4096 -aa 0`` (no irradiance cache: every sensor sampled).
 
 Run::
 
     .venv/bin/python -m bench.compare.lights_radiance          # ~1 min
+    .venv/bin/python -m bench.compare.lights_radiance --cases spot
 
 Prints, per case and surface, the mean irradiance (RGB) of both and their ratio.
 """
@@ -45,11 +57,26 @@ CIE_IRRADIANCE = 100.0
 #: room's coloured surfaces tint Radiance's RGB while ours is read as illuminance.
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 
+#: The cases, in the order they run by default.
+CASE_NAMES = ("point", "spot", "sun", "sky", "cie")
+
 PARAMS = ("-ab", "10", "-ad", "4096", "-as", "0", "-aa", "0", "-lw", "1e-6", "-lr", "-12",
           "-dj", "0", "-ds", "0", "-dt", "0", "-dc", "1", "-dr", "0", "-ss", "0", "-st", "1")
 
+#: rtrace options of the direct light alone (the spot case's cone check).
+DIRECT_PARAMS = ("-ab", "0") + PARAMS[2:]
+
 #: Sensors sit this far (m) in front of their surface for our hemicube (Radiance lifts its own).
 LIFT = 1e-4
+
+#: The spot's cone as a Radiance brightfunc: A1..A3 its unit axis, A4 cos(size / 2), A5 the
+#: blend's width in cosine (1 - A4) x blend > 0. Radiance's (Dx, Dy, Dz) is the ray's direction
+#: towards the light: the light leaves it along -D (as in Radiance's own source.cal).
+SPOT_CAL = """
+spot_cos = -(Dx*A1 + Dy*A2 + Dz*A3);
+spot_x = (spot_cos - A4) / A5;
+spot_f = if(spot_cos - A4, if(spot_x - 1, 1, spot_x*spot_x*(3 - 2*spot_x)), 0);
+"""
 
 
 def sources(case):
@@ -66,16 +93,29 @@ def sources(case):
     if case == "sky":
         return ("void glow skyglow 0 0 4 %s 0\nskyglow source sky 0 0 4 0 0 1 360\n"
                 % radiance._fmt(WORLDS["sky"]))
-    if case == "point":
+    if case in ("point", "spot"):
         text = ""
-        for i, light in enumerate(CASES["point"]):
+        for i, light in enumerate(CASES[case]):
             # Ours and Cycles: I = P colour / (4 pi) W/sr; a Lambertian sphere of radius r and
             # radiance L has I = L pi r^2 in every direction.
             r = light["radius"]
             L = light["power"] * np.asarray(light.get("color", (1, 1, 1)), float) \
                 / (4 * math.pi) / (math.pi * r * r)
-            text += ("void light bulb%d 0 0 3 %s\nbulb%d sphere bulb%d.s 0 0 4 %s %.9g\n"
-                     % (i, radiance._fmt(L), i, i, radiance._fmt(light["position"]), r))
+            modifier = "void"
+            if light["kind"] == "spot":
+                axis = np.asarray(light["direction"], float)
+                axis = axis / np.linalg.norm(axis)
+                cos_half = math.cos(light["spot_size"] / 2)
+                smooth = (1 - cos_half) * light["spot_blend"]
+                if smooth <= 0:
+                    raise ValueError("the spot case needs spot_blend > 0")
+                cal = _cal_file()
+                text += ("void brightfunc cone%d 2 spot_f %s 0 5 %s %.9g %.9g\n"
+                         % (i, cal, radiance._fmt(axis), cos_half, smooth))
+                modifier = "cone%d" % i
+            text += ("%s light bulb%d 0 0 3 %s\nbulb%d sphere bulb%d.s 0 0 4 %s %.9g\n"
+                     % (modifier, i, radiance._fmt(L), i, i, radiance._fmt(light["position"]),
+                        r))
         return text
     if case == "cie":
         import pyradiance as pr
@@ -85,7 +125,36 @@ def sources(case):
         return (sky + "\nskyfunc glow sky_glow 0 0 4 1 1 1 0\n"
                 "sky_glow source sky 0 0 4 0 0 1 180\n"
                 "sky_glow source ground 0 0 4 0 0 -1 180\n")
-    raise ValueError("case must be 'point', 'sun', 'sky' or 'cie'; got %r" % (case,))
+    raise ValueError("case must be one of %s; got %r" % (CASE_NAMES, case))
+
+
+def _cal_file():
+    """Path of :data:`SPOT_CAL` written once for this process (Radiance reads .cal files by
+    name; an absolute path needs no RAYPATH)."""
+    path = getattr(_cal_file, "path", None)
+    if path is None:
+        import atexit
+        import os
+        import tempfile
+
+        fd, path = tempfile.mkstemp(prefix="radiosity-spot-", suffix=".cal")
+        with os.fdopen(fd, "w") as f:
+            f.write(SPOT_CAL)
+        atexit.register(os.remove, path)
+        _cal_file.path = path
+    return path
+
+
+def spot_sensors():
+    """(points, normals, labels): the table top (facing up) and the floor beside the table
+    (facing up) on both sides of the spot's cone edge and through its blend."""
+    table = [[x, y, 0.75] for x in np.linspace(1.85, 3.15, 8) for y in np.linspace(1.45, 2.25, 5)]
+    floor = [[x, 1.85, 0.0] for x in np.concatenate([np.linspace(0.6, 1.7, 12),
+                                                     np.linspace(3.3, 4.4, 12)])] + \
+        [[2.5, y, 0.0] for y in np.linspace(0.2, 1.3, 10)]
+    points = np.array(table + floor, float)
+    normals = np.tile([0.0, 0.0, 1.0], (len(points), 1))
+    return points, normals, np.array(["table"] * len(table) + ["floor"] * len(floor))
 
 
 def sensors():
@@ -116,6 +185,17 @@ def ours_cie(points, normals):
     return np.repeat(E[:, None], 3, axis=1)
 
 
+def ours_direct(case, points, normals):
+    """The lights' direct irradiance (n, 3) alone, one shadow ray to each light's centre."""
+    from core.lights import DirectLight
+    from core.patches import make_patches
+    from core.scene import make_scene
+
+    scene = make_scene(**room_arrays(), lights=CASES[case])
+    direct = DirectLight(scene.lights, make_patches(scene, 0.25), min_size=1.0)
+    return np.pi * direct.incident(points + LIFT * normals, normals)
+
+
 def ours(case, points, normals):
     if case == "cie":
         return ours_cie(points, normals)
@@ -136,19 +216,22 @@ def ours(case, points, normals):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--cases", nargs="+", default=["point", "sun", "sky", "cie"],
-                    choices=["point", "sun", "sky", "cie"])
+    ap.add_argument("--cases", nargs="+", default=list(CASE_NAMES), choices=CASE_NAMES)
     ap.add_argument("--nproc", type=int, default=2)
     args = ap.parse_args(argv)
-    points, normals, labels = sensors()
     plane = np.array([[x, y, 0.85] for x in np.linspace(0.5, 4.5, 6)
                       for y in np.linspace(0.4, 3.6, 5)])
     to_rad = radiance.to_rad
     for case in args.cases:
+        points, normals, labels = sensors()
         if case == "cie":
             points = np.concatenate([points, plane])
             normals = np.concatenate([normals, np.tile([0, 0, 1.0], (len(plane), 1))])
             labels = np.concatenate([labels, ["work plane"] * len(plane)])
+        if case == "spot":
+            more = spot_sensors()
+            points, normals, labels = (np.concatenate([a, b]) for a, b in
+                                       zip((points, normals, labels), more))
         extra = sources(case)
 
         def with_source(arrays, two_sided_lights=True, emitter="glow"):
@@ -158,12 +241,15 @@ def main(argv=None):
         try:
             E_rad, seconds = radiance.irradiance(room_arrays(), points, normals, params=PARAMS,
                                                  nproc=args.nproc)
+            if case == "spot":
+                D_rad = radiance.irradiance(room_arrays(), points, normals,
+                                            params=DIRECT_PARAMS, nproc=args.nproc)[0] @ LUMA
         finally:
             radiance.to_rad = to_rad
         E_ours = ours(case, points, normals)
         if case == "cie":       # ours is illuminance (a luminance); Radiance's RGB to one too
             E_rad = np.repeat((E_rad @ LUMA)[:, None], 3, axis=1)
-        for where in ("ceiling", "walls", "work plane"):
+        for where in ("ceiling", "walls", "work plane", "table", "floor"):
             m = labels == where
             if not m.any():
                 continue
@@ -171,6 +257,17 @@ def main(argv=None):
             print("%s %-7s ours %s  Radiance %s  ratio %s" % (
                 case, where, np.array2string(a, precision=4), np.array2string(b, precision=4),
                 np.array2string(a / b, precision=3)))
+            if case == "spot":
+                r = (E_ours[m] @ LUMA) / (E_rad[m] @ LUMA)
+                print("%s %-7s per sensor ratio (luminance) %.3f to %.3f, median %.3f" % (
+                    case, where, r.min(), r.max(), np.median(r)))
+        if case == "spot":
+            D_ours = ours_direct(case, points, normals) @ LUMA
+            for where in ("table", "floor"):
+                m = (labels == where) & (D_rad > 0.01 * D_rad.max())
+                r = D_ours[m] / D_rad[m]
+                print("spot %-7s direct light alone, %d lit sensors: ratio %.4f to %.4f, "
+                      "mean %.4f" % (where, m.sum(), r.min(), r.max(), r.mean()))
         if case == "cie":
             m = labels == "work plane"
             df_o, df_r = (100 * E[m, 0] / CIE_IRRADIANCE for E in (E_ours, E_rad))

@@ -232,6 +232,23 @@ def test_matrix_free_progressive(monkeypatch):
 # ----------------------------------------------------------------------------- relight
 
 
+def _two_boxes():
+    """Two unit boxes 3 m apart, box A's top emitting: (vertices, polygons, materials,
+    reflectance, emission with box A lit, emission with box B's top lit too, settings).
+    Rows of the emitters themselves: the hemicube carries their light (exact_direct 'off')."""
+    a = unit_cube(n=1, emitting=("z+",), reflectance=0.5)
+    polys = [a.corner_verts[s:s + k] for s, k in zip(a.face_starts, a.face_sizes)]
+    verts = np.vstack([a.vertices, a.vertices + [3.0, 0.0, 0.0]])
+    polys = polys + [p + len(a.vertices) for p in polys]
+    mats = np.concatenate([a.face_materials, a.face_materials + 6])
+    rho = np.vstack([a.reflectance, a.reflectance])
+    em_a = np.vstack([a.emission, np.zeros((6, 3))])
+    em_b = np.vstack([a.emission, a.emission * 2])
+    s = _settings(patch_size=1.0, rotate_hemicube=False, output_mode="vertices",
+                  exact_direct="off")
+    return verts, polys, mats, rho, em_a, em_b, s
+
+
 def test_relight_equals_fresh_bake(small_room, monkeypatch):
     # Receiver elements are placed where the first bake's light changes, and a relight keeps
     # them (tests/core/test_elements.py): a fresh bake under other lights may place them
@@ -266,18 +283,7 @@ def test_relight_new_emitter_computes_only_new_rows():
     # Two separate closed boxes; only box A emits at first, so box B is never reached. Relight
     # switches box B's light on: its rows are computed then, and (no rotation, so rows do not
     # depend on the order they are computed in) the result equals a fresh bake.
-    a = unit_cube(n=1, emitting=("z+",), reflectance=0.5)
-    polys = [a.corner_verts[s:s + k] for s, k in zip(a.face_starts, a.face_sizes)]
-    verts = np.vstack([a.vertices, a.vertices + [3.0, 0.0, 0.0]])
-    nv = len(a.vertices)
-    polys = polys + [p + nv for p in polys]
-    mats = np.concatenate([a.face_materials, a.face_materials + 6])
-    rho = np.vstack([a.reflectance, a.reflectance])
-    em_a = np.vstack([a.emission, np.zeros((6, 3))])
-    em_b = np.vstack([a.emission, a.emission * 2])
-    # Rows of the emitters themselves: the hemicube carries their light (exact_direct 'off').
-    s = _settings(patch_size=1.0, rotate_hemicube=False, output_mode="vertices",
-                  exact_direct="off")
+    verts, polys, mats, rho, em_a, em_b, s = _two_boxes()
     first = bake(scene_from_polygons(verts, polys, mats, rho, em_a), s)
     # All 12 front nodes are solved; of the back nodes only box A's light's (it emits).
     assert first.report["nodes_active"] == 13
@@ -306,6 +312,109 @@ def test_relight_back_emission_equals_fresh_bake(small_room):
     kept = relight(base, emission=em2)        # without it, the bake's back emission stays
     np.testing.assert_allclose(kept.corner_colours,
                                bake(scene(em2, em), s).corner_colours, rtol=1e-10, atol=1e-12)
+
+
+def _count_balancing(monkeypatch):
+    """Count the Sinkhorn balancings (calls of make_reciprocal by the pipeline and of the
+    Sinkhorn iteration itself) from now on."""
+    pipeline = importlib.import_module("core.pipeline")
+    calls = dict(balance=0, sinkhorn=0)
+
+    def counted(name, fn):
+        def wrapper(*args, **kw):
+            calls[name] += 1
+            return fn(*args, **kw)
+        return wrapper
+    monkeypatch.setattr(pipeline, "make_reciprocal",
+                        counted("balance", pipeline.make_reciprocal))
+    monkeypatch.setattr(reciprocity, "_sinkhorn", counted("sinkhorn", reciprocity._sinkhorn))
+    return calls
+
+
+@pytest.mark.parametrize("solver", ["direct", "gauss_seidel"])
+def test_relight_reuses_the_balancing_and_equals_fresh_bake(small_room, monkeypatch, solver):
+    # The reciprocity scaling depends on the form factors and areas only: a relight with a new
+    # emission and reflectance applies the bake's again (no Sinkhorn sweep) and must still equal
+    # an independent fresh bake of the changed scene, to the tolerance of the test above.
+    s = _settings(patch_size=1.0, solver=solver, element_levels=0, output_mode="vertices")
+    base = bake(small_room, s)
+    assert base.report["solver"] == solver and base.report["reciprocity"]["sinkhorn_iterations"]
+    rho = small_room.reflectance * 0.9
+    emission = small_room.emission * np.array([2.0, 0.5, 0.25])
+    with monkeypatch.context() as m:
+        calls = _count_balancing(m)
+        re = relight(base, reflectance=rho, emission=emission)
+        assert calls == dict(balance=0, sinkhorn=0)
+        again = relight(re, reflectance=small_room.reflectance,   # back to the bake's
+                        emission=small_room.emission)
+        assert calls == dict(balance=0, sinkhorn=0)
+    assert re.report["reciprocity"] == dict(base.report["reciprocity"], reused=True)
+    assert re._state.balance is base._state.balance
+    # 8 bytes per solved node (and per unscaled node) are all the kept state gains.
+    kept = base._state.balance.balance
+    assert kept.nbytes == 8 * (base.report["nodes_active"] + kept.info["unscaled"])
+    fresh_scene = dataclasses.replace(small_room, reflectance=rho, emission=emission)
+    fresh = bake(fresh_scene, s)
+    assert fresh.report["reciprocity"].get("reused") is None
+    np.testing.assert_allclose(re.corner_colours, fresh.corner_colours, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(re.node_radiance, fresh.node_radiance, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(again.node_radiance, base.node_radiance, rtol=1e-10, atol=1e-12)
+
+
+def test_relight_balances_again_when_it_adds_rows(monkeypatch):
+    # Box B dark in the bake: a relight that lights it computes its rows, so the matrix grows
+    # and its scaling is made again (and kept: a further relight reuses it); a relight that
+    # leaves the solved nodes alone reuses the bake's. Each equals a fresh bake.
+    verts, polys, mats, rho, em_a, em_b, s = _two_boxes()
+
+    def fresh(em):
+        return bake(scene_from_polygons(verts, polys, mats, rho, em), s).node_radiance
+
+    calls = _count_balancing(monkeypatch)
+    first = bake(scene_from_polygons(verts, polys, mats, rho, em_a), s)
+    assert calls["balance"] == 1
+    same = relight(first, emission=3 * em_a)             # same nodes: reused
+    assert calls["balance"] == 1
+    grown = relight(first, emission=em_b)                # box B's rows added: balanced again
+    assert calls["balance"] == 2 and calls["sinkhorn"] >= 2
+    assert "reused" not in grown.report["reciprocity"]
+    assert grown._state.balance is not first._state.balance
+    again = relight(grown, emission=0.5 * em_b)          # the grown matrix's scaling: reused
+    assert calls["balance"] == 2 and again.report["reciprocity"]["reused"]
+    n = calls["balance"]
+    np.testing.assert_allclose(same.node_radiance, fresh(3 * em_a), rtol=1e-12)
+    np.testing.assert_allclose(grown.node_radiance, fresh(em_b), rtol=1e-12)
+    np.testing.assert_allclose(again.node_radiance, fresh(0.5 * em_b), rtol=1e-12)
+    assert calls["balance"] == n + 3                     # the fresh bakes balanced, each once
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_rebalance_repeats_make_reciprocal_bit_for_bit(monkeypatch, dtype):
+    # Several blocks (a small block size), and two nodes that cannot be balanced (see
+    # tests/core/test_contacts.py): the kept scaling rebuilds the very matrix, in place too.
+    monkeypatch.setattr(reciprocity, "_BLOCK", 7)
+    rng = np.random.default_rng(5)
+    n = 40
+    F = rng.random((n, n)) * (rng.random((n, n)) < 0.5)
+    np.fill_diagonal(F, 0.0)
+    F = F / F.sum(axis=1, keepdims=True) * rng.uniform(0.6, 1.0, size=(n, 1))
+    F[-2:], F[:, -2:] = 0.0, 0.0
+    F[-2, -1], F[-1, -2] = 0.02, 0.008
+    F = F.astype(dtype)
+    areas = np.r_[rng.uniform(0.05, 2.0, n - 2), 0.01, 0.01]
+    want, info = reciprocity.make_reciprocal(F, areas)
+    got, info_too, found = reciprocity.make_reciprocal(F, areas, return_balance=True)
+    assert info["unscaled"] == 2 and found.info == info == info_too
+    np.testing.assert_array_equal(got, want)
+    original = F.copy()
+    np.testing.assert_array_equal(reciprocity.rebalance(F, areas, found), want)
+    np.testing.assert_array_equal(F, original)                  # not mutated without out=F
+    assert reciprocity.rebalance(F, areas, found, out=F) is F
+    np.testing.assert_array_equal(F, want)
+    with pytest.raises(ValueError, match="F must be square"):
+        reciprocity.rebalance(original.astype(np.float16), areas, found)
+    with pytest.raises(TypeError, match="found must be a Balance"):
+        reciprocity.rebalance(original, areas, info)
 
 
 def test_relight_validation(small_room_direct):

@@ -215,3 +215,47 @@ def test_cancel_kills_workers_in_the_middle_of_one_long_call(room_patches):
     assert len(pids) == 2
     assert stopped - when["t"] < 0.5, stopped - when["t"]
     assert not any(_alive(p) for p in pids)
+
+
+def test_shared_rays_are_the_same_bits_even_ahead_of_pending_rows(room_patches):
+    """Shadow rays cut among the workers (core.raycast through parallel.share_rays) give the
+    same hits as one process, also when they are sent while a gather's rows are still being
+    computed (the rays' answers overtake the rows' and the rows come out right)."""
+    from core.raycast import any_hit, build_bvh, closest_hit
+
+    rng = np.random.default_rng(5)
+    tris = rng.random((400, 3, 3)) * 4.0
+    bvh = build_bvh(tris)
+    o, d = rng.random((3 * parallel.MIN_RAYS, 3)) * 4.0, rng.normal(size=(3 * parallel.MIN_RAYS, 3))
+    pts, nrm = _floor_points(200)
+    alone = (any_hit(bvh, o, d, 1.5), closest_hit(bvh, o, d),
+             point_rows(room_patches, pts, nrm, resolution=32, rng=3))
+    with parallel.using(2) as stats:
+        later = point_rows(room_patches, pts, nrm, resolution=32, rng=3, later=True)
+        hits, closest = any_hit(bvh, o, d, 1.5), closest_hit(bvh, o, d)
+        rows = later.result()
+    assert stats["calls"] == 3 and stats["processes"] == 2 and stats["problem"] is None
+    assert 0.1 < hits.mean() < 0.9                      # both answers occur
+    assert np.array_equal(hits, alone[0])
+    assert all(np.array_equal(a, b) for a, b in zip(closest, alone[1]))
+    assert np.array_equal(rows, alone[2])
+
+
+def test_a_bake_with_point_lights_shares_its_shadow_rays_and_keeps_its_bits(monkeypatch):
+    from bench.interiors import suite
+
+    shared = []
+    share_rays = parallel.share_rays
+
+    def counting(*args):
+        out = share_rays(*args)
+        shared.append(out is not None)
+        return out
+
+    monkeypatch.setattr("core.raycast.share_rays", counting)
+    settings = dict(vertex_budget=1500, min_element=0.05)
+    one = bake(suite(2), BakeSettings(workers=1, **settings))
+    assert not any(shared)
+    two = bake(suite(2), BakeSettings(workers=2, **settings))
+    assert sum(shared) >= 3                   # lights, exact emitters, shadow-edge tests
+    assert all(np.array_equal(a, b) for a, b in zip(_outputs(one), _outputs(two)))
