@@ -112,9 +112,9 @@ def draw_lux(layout, scene):
     props = scene.radiosity
     col = layout.column(align=True)
     col.operator("radiosity.lux_display", icon="COLOR", depress=is_shown(scene))
-    row = col.row(align=True)
-    row.prop(props, "lux_scale", text="")
-    row.prop(props, "lux_max", text="Max (auto)" if props.lux_max == 0 else "Max")
+    col.prop(props, "lux_scale", text="")
+    # A row of its own: beside the scale the label was cut to "Max (au..." at the default width.
+    col.prop(props, "lux_max", text="Max lx (auto)" if props.lux_max == 0 else "Max lx")
 
 
 def draw_advanced(layout, props):
