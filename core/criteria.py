@@ -464,3 +464,34 @@ def cavity_mask(patches, *, factor=CAVITY_FACTOR, min_size=0.0, check=None, emit
         cavity = front & apart & (width[None, q] >= gap) & (width[p, None] >= gap)
         mask[p] = np.any(cavity & (size[p, None] > factor * gap), axis=1)
     return mask
+
+
+def near_surfaces(patches, *, chunk=CAVITY_CHUNK):
+    """(P,) bool: patches within reach of another surface that is not in their plane.
+
+    Patch p is near q when their bounding spheres overlap and each centre lies off the other's
+    plane: a concave corner (a wall under the ceiling), an object standing on or against p.
+    There a point gathering close to the corner sees the near part of p under a large solid
+    angle, so p's mean radiance is not what it sees (:mod:`core.elements` splits such patches
+    at a lower contrast). Coplanar neighbours, and patches farther apart than their extents,
+    are not near.
+    """
+    P = patches.areas.size
+    mask = np.zeros(P, dtype=bool)
+    if P < 2:
+        return mask
+    centres, normals = patches.centres, patches.normals
+    radius, _ = patch_extents(patches.corners, centres)
+    order = spatial_order(centres)
+    for lo in range(0, P, chunk):
+        p = order[lo:lo + chunk]
+        reach = radius[p].max() + radius.max()
+        box_lo, box_hi = centres[p].min(axis=0) - reach, centres[p].max(axis=0) + reach
+        q = np.flatnonzero(np.all((centres >= box_lo) & (centres <= box_hi), axis=1))
+        d = centres[None, q, :] - centres[p, None, :]
+        overlap = np.linalg.norm(d, axis=2) < radius[p, None] + radius[None, q]
+        plane_p = np.abs(np.einsum("pqk,pk->pq", d, normals[p]))
+        plane_q = np.abs(np.einsum("pqk,qk->pq", d, normals[q]))
+        apart = (plane_p > COPLANAR * radius[p, None]) & (plane_q > COPLANAR * radius[None, q])
+        mask[p] = np.any(overlap & apart, axis=1)
+    return mask

@@ -31,6 +31,7 @@ import numpy as np
 
 from .exact import bilinear, gauss_square, pair_form_factor, point_polygon_form_factor
 from .geometry import patch_extents
+from .patches import connected_labels
 from .transfer import padded_polygons
 
 #: Emissive faces lit exactly at most (by material, fewest faces first). Measured cost: one
@@ -87,10 +88,7 @@ def exact_materials(scene, mode="all", resolution=64):
     if mode == "off":
         return np.zeros(le.shape[0], dtype=bool)
     if mode == "auto":
-        polys = padded_polygons(scene.vertices, scene.corner_verts, scene.face_starts,
-                                scene.face_sizes)
-        longest = patch_extents(polys, polys.mean(axis=1))[1]
-        width = scene.face_areas / np.maximum(longest, 1e-300)
+        width = lamp_widths(scene, real & emissive[scene.face_materials])
         extent = float(np.ptp(scene.vertices, axis=0).max()) if scene.vertices.size else 0.0
         wide = real & (width * resolution > AUTO_PIXELS * extent)
         emissive &= np.bincount(scene.face_materials[wide], minlength=le.shape[0]) == 0
@@ -106,6 +104,46 @@ def exact_materials(scene, mode="all", resolution=64):
         total += int(faces[m])
         total_area += float(area[m])
     return out
+
+
+def lamp_widths(scene, faces):
+    """(F,) float: the width (area / longest extent, m) of the lamp each face belongs to.
+
+    A lamp is a sheet of ``faces`` (bool mask) of one material that share vertices and face the
+    same way: a panel meshed into a grid of small faces (an imported or pre-meshed luminaire)
+    is one 0.6 m lamp, as wide to the hemicube as the same panel modelled as one quad, not
+    sixteen 0.15 m ones. The lamp's extent is the longest side of its bounding box; faces not in
+    ``faces`` keep their own width.
+    """
+    polys = padded_polygons(scene.vertices, scene.corner_verts, scene.face_starts,
+                            scene.face_sizes)
+    longest = patch_extents(polys, polys.mean(axis=1))[1]
+    F = scene.face_areas.size
+    width = scene.face_areas / np.maximum(longest, 1e-300)
+    faces = np.asarray(faces, dtype=bool)
+    if faces.sum() < 2:
+        return width
+    face_of = np.repeat(np.arange(F), scene.face_sizes)
+    verts = np.asarray(scene.corner_verts, dtype=np.int64)
+    keep = faces[face_of]
+    f, v = face_of[keep], verts[keep]
+    order = np.lexsort((f, v))
+    f, v = f[order], v[order]
+    same = (v[1:] == v[:-1]) & (f[1:] != f[:-1])           # consecutive faces at one vertex
+    a, b = f[:-1][same], f[1:][same]
+    mat = np.asarray(scene.face_materials)
+    nrm = np.asarray(scene.face_normals)
+    link = (mat[a] == mat[b]) & (np.einsum("ij,ij->i", nrm[a], nrm[b]) > 1.0 - 1e-6)
+    label = connected_labels(F, a[link], b[link])
+    pos = np.asarray(scene.vertices, dtype=np.float64)[verts]
+    lo = np.full((F, 3), np.inf)
+    hi = np.full((F, 3), -np.inf)
+    np.minimum.at(lo, label[face_of], pos)
+    np.maximum.at(hi, label[face_of], pos)
+    area = np.bincount(label, weights=scene.face_areas, minlength=F)
+    lamp = area / np.maximum((hi - lo).max(axis=1), 1e-300)
+    multi = faces & (np.bincount(label, minlength=F)[label] > 1)
+    return np.where(multi, lamp[label], width)
 
 
 class Emitters:

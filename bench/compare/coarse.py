@@ -255,6 +255,18 @@ GENERATORS = {"cornell_box": ("--grid", "--output", 0.05),
               "office": ("--face-size", "--out", 0.2)}
 
 
+def on_module(name, grid):
+    """Whether a uniform ``grid`` (m) is on the module of the reference's pre-meshed copy: a
+    multiple or a whole fraction of its grid. Such a copy's vertices are among the reference's
+    corners (coarser) or include them all (finer, or the same), where its own colours are
+    sampled with no interpolation; and the office is drawn on its 0.2 m module (every outline
+    of its furniture lies on it), so such a copy also has edges along every contact line. A
+    grid off the module (the office at 0.15, 0.25, 0.3 m) is what a user's uniform
+    subdivision of a model gets."""
+    module = GENERATORS[name][2]
+    return any(abs(r - round(r)) < 1e-6 for r in (grid / module, module / grid))
+
+
 def grid_blend(name, grid, cache):
     """Path of the ``grid``-metre pre-meshed copy (made with .venv-bpy42 if missing)."""
     size_opt, out_opt, bench_grid = GENERATORS[name]
@@ -466,14 +478,17 @@ def summary(rows, key="rms"):
     faces): error at defaults, uniform vertices and Cycles time at that error."""
     d = next(r for r in rows if r["label"] == "adaptive (defaults)")
     uni = [r for r in rows if r["method"] == "uniform"]
+    off = [r for r in uni if not on_module(r["scene"], r["grid"])]
     cyc = [r for r in rows if r["method"] == "cycles"]
     vu, how_v = at_error([r["vertices"] for r in uni], [r[key] for r in uni], d[key])
+    vo, how_o = at_error([r["vertices"] for r in off], [r[key] for r in off], d[key])
     tu, how_tu = at_error([r["t_total"] for r in uni], [r[key] for r in uni], d[key])
     tc, how_c = at_error([r["t_total"] for r in cyc], [r[key] for r in cyc], d[key])
     return dict(rms=d[key], rms_denoised=d["rms_denoised"], p95=d["p95"],
                 vertices=d["vertices"], seconds=d["t_total"], uniform_vertices=vu,
                 uniform_how=how_v, ratio=d["vertices"] / vu, uniform_seconds=tu,
-                uniform_time_how=how_tu, cycles_seconds=tc, cycles_how=how_c,
+                uniform_time_how=how_tu, off_vertices=vo, off_how=how_o,
+                off_ratio=d["vertices"] / vo, cycles_seconds=tc, cycles_how=how_c,
                 speedup=tc / d["t_total"])
 
 
@@ -502,62 +517,9 @@ def read_csv(path):
     return rows
 
 
-STYLE = {"adaptive": ("s", "C0"), "uniform": ("o-", "C1"), "cycles": ("^-", "C2")}
-
-
-def chart(rows, path, title):
-    """Two log-log panels: error against output vertices, error against wall time."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import matplotlib.ticker
-
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.8))
-    ref = next(r for r in rows if r["method"] == "reference")
-    for ax, key, xlabel in ((axes[0], "vertices", "output vertices"),
-                            (axes[1], "t_total", "wall time (s, 2 shared cores)")):
-        for method, (style, colour) in STYLE.items():
-            rs = sorted((r for r in rows if r["method"] == method), key=lambda r: r[key])
-            if not rs:
-                continue
-            name = {"adaptive": "adaptive mesh (coarse model)",
-                    "uniform": "ours, uniform grid (Existing Vertices)",
-                    "cycles": "Cycles, pre-meshed copy"}[method]
-            ax.plot([r[key] for r in rs], [100 * r["rms"] for r in rs], style, color=colour,
-                    label=name, ms=6)
-            ax.plot([r[key] for r in rs], [100 * r["rms_rest"] for r in rs], style[0],
-                    color=colour, mfc="none", ms=6, alpha=0.6)
-            for j, r in enumerate(rs):
-                tag = {"adaptive": r["label"].replace("adaptive ", ""),
-                       "uniform": "%g m" % r.get("grid", 0),
-                       "cycles": "%d spp" % int(r.get("samples", 0))}[method]
-                # Adaptive runs often land on one spot: their labels are stacked.
-                dy = 3 - 8 * (j % 4) if method == "adaptive" else 3
-                ax.annotate(tag, (r[key], 100 * r["rms"]), fontsize=6, xytext=(5, dy),
-                            textcoords="offset points")
-            d = [r for r in rs if r["label"] == "adaptive (defaults)"]
-            if d:
-                ax.plot([d[0][key]], [100 * d[0]["rms"]], "*", color="C3", ms=14,
-                        label="adaptive at defaults")
-        ax.plot([], [], "o", color="grey", mfc="none",
-                label="open: without each run's %d worst faces" % WORST)
-        ax.axhline(100 * ref["rms"], color="grey", ls=":", label="reference noise")
-        for level in (5, 2):
-            ax.axhline(level, color="r", lw=0.6, ls="-.")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-        ax.set_xlabel(xlabel)
-        ax.set_ylabel("area-weighted relative RMS error (%)")
-        ax.grid(True, which="both", alpha=0.3)
-    axes[0].legend(fontsize=7, loc="lower left")
-    fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
 def main(argv=None):
+    from .coarse_chart import chart
+
     ap = argparse.ArgumentParser(description="Coarse models: adaptive mesh vs uniform vs Cycles.")
     ap.add_argument("--scene", default="cornell_box", choices=sorted(GENERATORS))
     ap.add_argument("--blend-dir", default=str(ROOT / "bench" / "blends"),
@@ -588,7 +550,8 @@ def main(argv=None):
         chart(read_csv(base.with_suffix(".csv")), base.with_suffix(".png"), title)
         return
     if args.grids is None:
-        args.grids = dict(cornell_box=[0.2, 0.1, 0.05, 0.025], office=[0.8, 0.4, 0.2])[args.scene]
+        args.grids = dict(cornell_box=[0.2, 0.15, 0.1, 0.075, 0.05, 0.035, 0.025],
+                          office=[0.8, 0.4, 0.3, 0.25, 0.2, 0.15, 0.12, 0.1])[args.scene]
     if args.reference_seeds < 2:
         ap.error("--reference-seeds must be >= 2 (the reference's noise comes from their spread)")
     if args.reference_samples in args.cycles_samples:
@@ -612,6 +575,9 @@ def main(argv=None):
         print("  uniform at equal error: %.0f vertices (%s), %.1f s; adaptive/uniform vertices "
               "%.0f %%" % (s["uniform_vertices"], s["uniform_how"], s["uniform_seconds"],
                            100 * s["ratio"]))
+        print("  uniform off the design module at equal error: %.0f vertices (%s); "
+              "adaptive/uniform vertices %.0f %%" % (s["off_vertices"], s["off_how"],
+                                                     100 * s["off_ratio"]))
         print("  Cycles (pre-meshed copy) at equal error: %.1f s (%s); adaptive time / Cycles "
               "time %.2f" % (s["cycles_seconds"], s["cycles_how"], 1.0 / s["speedup"]))
     print("worst faces at defaults: " + notes["worst"])

@@ -148,3 +148,25 @@ def test_reference_corners_are_sampled_inside_their_faces():
                                * np.linalg.norm(ref["vertices"] - [0.75, 0.5, 0], axis=1))
     values, miss = sample(ours, pts, nrm, grp)
     assert np.all(values == 0.0) and np.all(miss <= coarse.BARY_TOL)
+
+
+def test_uniform_grids_on_the_design_module_are_told_apart():
+    # The office is drawn on 0.2 m: grids that divide it or that it divides have edges on every
+    # outline (and at 0.2 and 0.1 m vertices at every reference corner); the others do not.
+    for grid in (0.8, 0.4, 0.2, 0.1, 0.05):
+        assert coarse.on_module("office", grid), grid
+    for grid in (0.3, 0.25, 0.15, 0.12):
+        assert not coarse.on_module("office", grid), grid
+    rows = [dict(scene="office", method="adaptive", label="adaptive (defaults)", vertices=1000,
+                 t_total=1.0, rms=0.04, rms_denoised=0.04, p95=0.1),
+            dict(scene="office", method="cycles", t_total=1.0, rms=0.08),
+            dict(scene="office", method="cycles", t_total=4.0, rms=0.02)]
+    rows += [dict(scene="office", method="uniform", grid=g, vertices=v, t_total=1.0, rms=e)
+             for g, v, e in ((0.4, 100, 0.3), (0.2, 400, 0.01), (0.3, 200, 0.16),
+                             (0.15, 800, 0.08), (0.12, 1600, 0.02))]
+    s = coarse.summary(rows)
+    # On all grids, 4 % lies between 0.4 m and 0.2 m; off the module, between 0.15 and 0.12 m
+    # (a power law: 8 % -> 2 % over 2x vertices halves the error per 1.41x, so 4 % at 1131).
+    assert 100 < s["uniform_vertices"] < 400
+    assert s["off_vertices"] == pytest.approx(800 * 2 ** 0.5, rel=1e-9)
+    assert s["off_ratio"] == pytest.approx(1000 / (800 * 2 ** 0.5), rel=1e-9)
