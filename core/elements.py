@@ -153,17 +153,18 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
     steps = []
     rounds = levels + (near_threshold is not None and levels > 0)
     for level in range(rounds):
-        masks = [refine_mask(elements, seen[s], np.any(side_le[s][elements.material] > 0, axis=1),
-                             threshold=threshold, crease_angle=crease_angle, mean=mean)
-                 for s in (0, 1)]
-        if level >= levels:                 # the near round only
-            masks = [np.zeros_like(m) for m in masks]
-        if near_threshold is not None:
-            near = near_surfaces(elements)
-            masks = [m | (near & refine_mask(
-                elements, seen[s], np.any(side_le[s][elements.material] > 0, axis=1),
-                threshold=near_threshold, crease_angle=crease_angle, mean=mean))
-                for s, m in enumerate(masks)]
+        emitting = [np.any(side_le[s][elements.material] > 0, axis=1) for s in (0, 1)]
+        near = None if near_threshold is None else near_surfaces(elements)
+        masks = []
+        for s in (0, 1):
+            m = np.zeros(elements.areas.size, dtype=bool)
+            if level < levels:              # the general step (the last round is near only)
+                m = refine_mask(elements, seen[s], emitting[s], threshold=threshold,
+                                crease_angle=crease_angle, mean=mean)
+            if near is not None:
+                m |= near & refine_mask(elements, seen[s], emitting[s], threshold=near_threshold,
+                                        crease_angle=crease_angle, mean=mean)
+            masks.append(m)
         mask = masks[0] | masks[1]
         if not mask.any():
             break

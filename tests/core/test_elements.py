@@ -32,12 +32,8 @@ def _panel_corners():
     return np.array([[p0, p0, z], [p0, p1, z], [p1, p1, z], [p1, p0, z]])
 
 
-def hung_panel(n=4):
-    """2 x 2 m floor and ceiling (n x n faces), a 0.5 m panel hung under the ceiling, no walls."""
-    p0, p1 = PANEL
-    parts = [((0, 0, 0), (2, 0, 0), (0, 2, 0), n, 0),                 # floor, normal +z
-             ((0, 0, H), (0, 2, 0), (2, 0, 0), n, 1),                 # ceiling, normal -z
-             ((p0, p0, H - DROP), (0, p1 - p0, 0), (p1 - p0, 0, 0), 1, 2)]   # panel, -z
+def _grids_scene(parts, reflectance, emission):
+    """A scene of ``grid`` parts (origin, a, b, n, material), one material per part."""
     verts, polys, mats, off = [], [], [], 0
     for origin, a, b, k, m in parts:
         v, q = grid(origin, a, b, k)
@@ -45,9 +41,17 @@ def hung_panel(n=4):
         polys += (np.asarray(q) + off).tolist()
         mats += [m] * len(q)
         off += len(v)
-    return scene_from_polygons(np.vstack(verts), polys, mats,
-                               [[RHO_FLOOR] * 3, [RHO_CEILING] * 3, [0.0] * 3],
-                               [[0.0] * 3, [0.0] * 3, [LE] * 3])
+    return scene_from_polygons(np.vstack(verts), polys, mats, reflectance, emission)
+
+
+def hung_panel(n=4):
+    """2 x 2 m floor and ceiling (n x n faces), a 0.5 m panel hung under the ceiling, no walls."""
+    p0, p1 = PANEL
+    parts = [((0, 0, 0), (2, 0, 0), (0, 2, 0), n, 0),                 # floor, normal +z
+             ((0, 0, H), (0, 2, 0), (2, 0, 0), n, 1),                 # ceiling, normal -z
+             ((p0, p0, H - DROP), (0, p1 - p0, 0), (p1 - p0, 0, 0), 1, 2)]   # panel, -z
+    return _grids_scene(parts, [[RHO_FLOOR] * 3, [RHO_CEILING] * 3, [0.0] * 3],
+                        [[0.0] * 3, [0.0] * 3, [LE] * 3])
 
 
 def oracle_irradiance(x, cells=600):
@@ -148,16 +152,8 @@ def lit_wall():
              ((0, 0, 0), (0, 2, 0), (0, 0, 2), 4, 1),                  # wall, +x
              (WALL_PANEL[0], WALL_PANEL[3] - WALL_PANEL[0], WALL_PANEL[1] - WALL_PANEL[0], 1,
               2)]                                                        # panel, -x
-    verts, polys, mats, off = [], [], [], 0
-    for origin, a, b, k, m in parts:
-        v, q = grid(origin, a, b, k)
-        verts.append(v)
-        polys += (np.asarray(q) + off).tolist()
-        mats += [m] * len(q)
-        off += len(v)
-    return scene_from_polygons(np.vstack(verts), polys, mats,
-                               [[RHO_FLOOR] * 3, [RHO_WALL] * 3, [0.0] * 3],
-                               [[0.0] * 3, [0.0] * 3, [LE] * 3])
+    return _grids_scene(parts, [[RHO_FLOOR] * 3, [RHO_WALL] * 3, [0.0] * 3],
+                        [[0.0] * 3, [0.0] * 3, [LE] * 3])
 
 
 def wall_oracle(x, cells=800):
