@@ -103,6 +103,9 @@ class AdaptiveState:
     elements : core.elements.Elements or None
     seen : Seen
         The (lit) patches or elements the gathers drew.
+    far_field : core.farfield.FarField or None
+        With receiver elements: the rows' columns are its :attr:`~FarField.n_cols` (elements,
+        then far patches), read against :meth:`~FarField.radiance`.
     user : (C,) int64
         Output corner whose colour each user corner takes (-1: none, a dropped face).
     direct : (U, 3) float64
@@ -120,7 +123,10 @@ class AdaptiveState:
         L = node_radiance
         if self.elements is not None:
             L = self.elements.node_radiance(scene, node_radiance)
-        inc = self.rows.incident(self.seen.radiance(L)) + self.direct
+        L = self.seen.radiance(L)
+        if self.far_field is not None:
+            L = self.far_field.radiance(L)
+        inc = self.rows.incident(L) + self.direct
         return shade(scene, self.material, inc)[self.entry], inc[self.entry]
 
 
@@ -175,15 +181,23 @@ class _Cache:
 
     def rows_for(self, ids):
         """A RowStore whose group g is cache entry ``ids[g]`` (``ids`` distinct; entries never
-        gathered get no row: their incident light is zero)."""
+        gathered get no row: their incident light is zero). Empties the cache's rows."""
         store = RowStore(ids.size, self.n_nodes)
         pos = np.full(self.keys.shape[0], -1, dtype=np.int64)
         pos[ids] = np.arange(ids.size)
-        for kid, cols, vals in self.batches:
+        # The cache's batches are handed over (a batch whose rows are all kept is not copied)
+        # and let go one by one: the rows are not held twice at the end of a large bake.
+        batches, self.batches = self.batches, []
+        batches.reverse()
+        while batches:
+            kid, cols, vals = batches.pop()
             g = pos[kid]
             ok = g >= 0
-            if ok.any():
+            if ok.all():
+                store.add_compact(g, cols, vals)
+            elif ok.any():
                 store.add_compact(g[ok], cols, vals[ok])
+            del kid, cols, vals
         return store
 
 
@@ -278,12 +292,13 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
     far_field = None
     if elements is not None:
         far_field = FarField(patches, seen, np.asarray(elements.parent)[seen.keep])
+        seen_L = far_field.radiance(seen_L)       # what its compact rows' columns read
     emission = np.asarray(scene.emission)
     lit = _lit(scene, patches, incident, flipped)
     floor = dark_floor(patches, L[:P], scene)
     rng = np.random.default_rng([settings.seed, 2])
     emitters = EmitterSamples(scene, patches, np.random.default_rng([settings.seed, 4]))
-    cache = _Cache(2 * seen.areas.size)
+    cache = _Cache(seen_L.shape[0])
     tree = ElementTree.from_patches(scene, patches)
     outline = contact_edges(scene, tree, contacts)
     steps = []
@@ -360,6 +375,7 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
                 vis[pos_in_new] |= bits << SHADOW_SAMPLES
         added = cache.add(keys[new], inc, vis, dl)
         cache.batches.extend((added[p], cols, vals) for p, cols, vals in batches)
+        batches = None                       # the cache holds them now
         ids[new] = added
         group_value = shade(scene, groups.material, cache.incident[ids])
         C = leaf_scene.n_corners
@@ -393,6 +409,8 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         tree, n_split = split
         steps.append(step | dict(split=n_split, seconds=time.perf_counter() - t0))
 
+    if far_field is not None:
+        far_field.release()
     mesh = output_mesh(scene, tree, conf, corner_value)
     u_ids, entry = np.unique(ids, return_inverse=True)
     entry = entry.reshape(-1)
@@ -404,6 +422,7 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
     state = AdaptiveState(mesh=mesh, entry=corner_entry,
                           material=cache.keys[u_ids, 1].astype(np.int64),
                           rows=cache.rows_for(u_ids), lit=lit, elements=elements, seen=seen,
+                          far_field=far_field,
                           user=_user_corners(scene, mesh), direct=cache.direct[u_ids])
     report = dict(levels=steps, leaves=int(tree.leaves.shape[0]),
                   points=int(tree.points.shape[0]), budget_hit=budget_hit,

@@ -45,8 +45,16 @@ class Drawn:
 
 
 class FarField:
-    """Gather rows with far patches drawn whole (:data:`FAR_FIELD`), returned against the seen
-    elements' columns.
+    """Gather rows with far patches drawn whole (:data:`FAR_FIELD`).
+
+    Dense rows (``compact=False``) are against the seen elements' 2K nodes, a far patch's form
+    factor spread over its elements by area. Compact rows (what the mesh stage keeps) are
+    against :attr:`n_cols` = 2K + 2P columns instead: the 2K element nodes, then the solved
+    patches' 2P nodes, a far patch's form factor in its own column, read against the area
+    mean of its seen elements' radiance (:meth:`radiance`). The light gathered is the same
+    (``sum_e F w_e L_e = F sum_e w_e L_e``), but a far patch costs one column, not one per
+    element: with near receiver elements a gather batch's rows otherwise hold every element of
+    every patch it sees from afar.
 
     Parameters
     ----------
@@ -64,14 +72,34 @@ class FarField:
         self.has = np.zeros(P, dtype=bool)
         self.has[parent] = True
         self.weight = seen.areas / patches.areas[parent]
+        # What a far patch's column covers of it: its seen elements' share of its area.
+        self.cover = np.bincount(parent, weights=self.weight, minlength=P)
         self.radius, self.size = patch_extents(patches.corners, patches.centres)
+        self.n_cols = 2 * parent.size + 2 * P
         self.drawn_items = 0
         self._last = None                      # (far mask, Drawn) of the last batch
 
+    def radiance(self, seen_radiance):
+        """(n_cols, 3) radiance the compact rows read: the seen elements' (2K, 3), then every
+        solved patch's area mean of its seen elements' (front nodes, then back nodes)."""
+        L = np.asarray(seen_radiance, dtype=np.float64)
+        K, P = self.parent.size, self.patches.areas.size
+        out = np.zeros((self.n_cols, 3))
+        out[:2 * K] = L
+        w = self.weight[:, None]
+        np.add.at(out, 2 * K + self.parent, w * L[:K])
+        np.add.at(out, 2 * K + P + self.parent, w * L[K:])
+        return out
+
+    def release(self):
+        """Drop the last batch's drawing (its polygons); the rows' reading stays usable."""
+        self._last = None
+
     def rows(self, points, normals, compact=False, **kw):
-        """(S, 2K) rows of ``points`` against the seen elements' nodes (with ``later=True``, a
-        :class:`core.parallel.Deferred` of them); with ``compact=True``, the rows as
-        :func:`compact_with_sums` gives them, made without the dense (S, 2K) rows."""
+        """Rows of ``points``: dense (S, 2K) against the seen elements' nodes, or with
+        ``compact=True`` the (cols, vals, row sums) of :func:`compact_with_sums` against the
+        :attr:`n_cols` columns (made without dense rows); with ``later=True``, a
+        :class:`core.parallel.Deferred` of them."""
         lo, hi = points.min(axis=0), points.max(axis=0)
         centres = self.patches.centres
         gap = np.linalg.norm(centres - np.clip(centres, lo, hi), axis=1) - self.radius
@@ -91,8 +119,12 @@ class FarField:
         drawn = self._last[1]
         self.drawn_items += whole.size + near.size
         mixed = point_rows(drawn, points, normals, **kw)            # (S, 2D)
-        unmix = _unmix_compact if compact else _unmix
-        args = (far, whole, near, self.parent, self.weight)
+        if compact:
+            unmix = _unmix_compact
+            args = (whole, near, self.parent.size, self.patches.areas.size, self.cover)
+        else:
+            unmix = _unmix
+            args = (far, whole, near, self.parent, self.weight)
         if kw.get("later"):
             return mixed.then(lambda m: unmix(m, *args))
         return unmix(mixed, *args)
@@ -121,34 +153,25 @@ def compact_with_sums(rows):
     return cols, vals, rows[:, cols].sum(axis=1)
 
 
-def _unmix_compact(mixed, far, whole, near, parent, weight):
-    """:func:`compact_with_sums` of :func:`_unmix`, from the mixed rows' hit columns only (the
-    dense rows span every seen element: tens of megabytes per batch on a large model)."""
-    D, K, W = whole.size + near.size, parent.size, whole.size
+def _unmix_compact(mixed, whole, near, K, P, cover):
+    """(cols, vals, row sums) of the mixed rows against :attr:`FarField.n_cols` columns: a near
+    element's column is its node (e, or K + e on the back), a far patch's is 2K + p (2K + P + p
+    on the back); the row sums count a far patch's form factor times the share of it its seen
+    elements cover (what the element-space rows summed)."""
+    D, W = whole.size + near.size, whole.size
     hit = np.flatnonzero(np.any(mixed > 0, axis=0))             # mixed columns, both sides
     back = hit >= D
     j = hit - D * back                                           # index in [0, D)
     is_near = j >= W
-    cols = [near[j[is_near] - W] + K * back[is_near]]
-    source = [hit[is_near]]
-    scale = [np.ones(int(is_near.sum()))]
-    slot = np.full(far.size, -1, dtype=np.int64)
-    slot[whole] = np.arange(W)
-    child = np.flatnonzero(far[parent])
-    col = slot[parent[child]]                                    # far column of each child
-    for side in (False, True):
-        lit = np.zeros(W, dtype=bool)
-        lit[j[~is_near & (back == side)]] = True
-        kids = child[lit[col]]
-        cols.append(kids + K * side)
-        source.append(col[lit[col]] + D * side)
-        scale.append(weight[kids])
-    cols, source, scale = (np.concatenate(a) for a in (cols, source, scale))
+    cols = np.empty(hit.size, dtype=np.int64)
+    scale = np.ones(hit.size)
+    cols[is_near] = near[j[is_near] - W] + K * back[is_near]
+    far_patch = whole[j[~is_near]]
+    cols[~is_near] = 2 * K + far_patch + P * back[~is_near]
+    scale[~is_near] = cover[far_patch]
     order = np.argsort(cols, kind="stable")
-    values = mixed[:, source[order]] * scale[order]
-    keep = np.any(values > 0, axis=0)
-    values = values[:, keep]
-    return cols[order][keep], values.astype(np.float32), values.sum(axis=1)
+    values = mixed[:, hit[order]]
+    return cols[order], values.astype(np.float32), values @ scale[order]
 
 
 def seen_subset(patches, radiance, power):
