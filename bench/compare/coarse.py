@@ -268,16 +268,13 @@ def on_module(name, grid):
     return any(abs(r - round(r)) < 1e-6 for r in (grid / module, module / grid))
 
 
-#: Scenes whose copy in bench/blends is not the coarse sample's geometry: the apartment's was
-#: left as measured when its generator's 7 door reveals and heads were turned to face the
-#: doorways (d0184d7), so Cycles baked those faces from inside the wall. The coarse comparison
-#: remakes the copy with the generator (in the cache) and takes its reference from that.
+#: Scenes whose bench/blends copy predates a fix of their generator (the apartment's: d0184d7
+#: turned 7 door reveals to face the doorways): the reference is baked on a copy remade anew.
 REMADE = ("apartment",)
 
 
 def grid_blend(name, grid, cache, remake=False):
-    """Path of the ``grid``-metre pre-meshed copy (made with .venv-bpy42 if missing; the
-    bench/blends copy at its own grid unless ``remake``)."""
+    """Path of the ``grid`` m copy (made if missing; bench/blends' at its grid unless remake)."""
     size_opt, out_opt, bench_grid = GENERATORS[name]
     if abs(grid - bench_grid) < 1e-9 and not remake:
         return ROOT / "bench" / "blends" / ("%s.blend" % name)
@@ -562,8 +559,7 @@ def main(argv=None):
         chart(read_csv(base.with_suffix(".csv")), base.with_suffix(".png"), title)
         return
     if args.grids is None:
-        # The apartment's uniform copies cost ~1,000 s at its own 0.13 m (24,710 faces):
-        # none by default (--grids to ask for them).
+        # The apartment's uniform copies cost ~1,000 s at 0.13 m: none unless --grids asks.
         args.grids = dict(cornell_box=[0.2, 0.15, 0.1, 0.075, 0.05, 0.035, 0.025],
                           office=[0.8, 0.4, 0.3, 0.25, 0.2, 0.15, 0.12, 0.1],
                           apartment=[])[args.scene]
