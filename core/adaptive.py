@@ -123,11 +123,15 @@ class AdaptiveState:
         L = node_radiance
         if self.elements is not None:
             L = self.elements.node_radiance(scene, node_radiance)
-        L = self.seen.radiance(L)
-        if self.far_field is not None:
-            L = self.far_field.radiance(L)
-        inc = self.rows.incident(L) + self.direct
+        inc = self.rows.incident(_rows_radiance(self.seen, self.far_field, L)) + self.direct
         return shade(scene, self.material, inc)[self.entry], inc[self.entry]
+
+
+def _rows_radiance(seen, far_field, node_radiance):
+    """(n_cols, 3) radiance the kept gather rows read from the (2E, 3) radiance of the nodes
+    ``seen`` was taken from: the seen nodes', then (with a far field) its far patches'."""
+    L = seen.radiance(node_radiance)
+    return L if far_field is None else far_field.radiance(L)
 
 
 def _leaf_scene(scene, tree, conf, flipped=None):
@@ -197,7 +201,6 @@ class _Cache:
                 store.add_compact(g, cols, vals)
             elif ok.any():
                 store.add_compact(g[ok], cols, vals[ok])
-            del kid, cols, vals
         return store
 
 
@@ -288,11 +291,10 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         seen = seen_subset(seen, seen_L, power)
     else:
         seen = Seen(seen, np.arange(seen.areas.size))
-    seen_L = seen.radiance(seen_L)
     far_field = None
     if elements is not None:
         far_field = FarField(patches, seen, np.asarray(elements.parent)[seen.keep])
-        seen_L = far_field.radiance(seen_L)       # what its compact rows' columns read
+    seen_L = _rows_radiance(seen, far_field, seen_L)
     emission = np.asarray(scene.emission)
     lit = _lit(scene, patches, incident, flipped)
     floor = dark_floor(patches, L[:P], scene)
