@@ -112,6 +112,10 @@ class AdaptiveState:
         Light from beyond the hemicube's surfaces (irradiance / pi,
         :meth:`core.lights.DirectLight.extra`: the lights' direct light and the world's
         share) at the U points.
+    points, normals : (U, 3) float64
+        Where the U points gathered, and facing where.
+    cast : (U,) bool
+        The points whose ``direct`` the lights gave (:mod:`core.recolour` recolours it there).
     """
 
     def __init__(self, **kw):
@@ -161,6 +165,9 @@ class _Cache:
         self.incident = np.zeros((0, 3))
         self.direct = np.zeros((0, 3))
         self.vis = np.zeros(0, dtype=np.int64)
+        self.points = np.zeros((0, 3))
+        self.normals = np.zeros((0, 3))
+        self.cast = np.zeros(0, dtype=bool)
         self.batches = []                      # (key ids (S,), cols (K,), vals (S, K) f32)
         self.n_nodes = n_nodes
 
@@ -175,8 +182,11 @@ class _Cache:
         where[inv[:self.keys.shape[0]]] = np.arange(self.keys.shape[0])
         return where[inv[self.keys.shape[0]:]]
 
-    def add(self, keys, incident, vis, direct):
+    def add(self, keys, incident, vis, direct, points, normals, cast):
         start = self.keys.shape[0]
+        self.points = np.concatenate([self.points, points])
+        self.normals = np.concatenate([self.normals, normals])
+        self.cast = np.concatenate([self.cast, cast])
         self.keys = np.concatenate([self.keys, keys])
         self.incident = np.concatenate([self.incident, incident])
         self.direct = np.concatenate([self.direct, direct])
@@ -375,7 +385,9 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
                     sky=None if sky is None else sky_in[pos_in_new])
                 inc[pos_in_new] += dl[pos_in_new]
                 vis[pos_in_new] |= bits << SHADOW_SAMPLES
-        added = cache.add(keys[new], inc, vis, dl)
+        cast = np.zeros(new.size, dtype=bool)
+        cast[pos_in_new] = direct is not None
+        added = cache.add(keys[new], inc, vis, dl, groups.points[new], groups.normals[new], cast)
         cache.batches.extend((added[p], cols, vals) for p, cols, vals in batches)
         batches = None                       # the cache holds them now
         ids[new] = added
@@ -425,7 +437,9 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
                           material=cache.keys[u_ids, 1].astype(np.int64),
                           rows=cache.rows_for(u_ids), lit=lit, elements=elements, seen=seen,
                           far_field=far_field,
-                          user=_user_corners(scene, mesh), direct=cache.direct[u_ids])
+                          user=_user_corners(scene, mesh), direct=cache.direct[u_ids],
+                          points=cache.points[u_ids], normals=cache.normals[u_ids],
+                          cast=cache.cast[u_ids])
     report = dict(levels=steps, leaves=int(tree.leaves.shape[0]),
                   points=int(tree.points.shape[0]), budget_hit=budget_hit,
                   per_object=per_object_report(scene, mesh))

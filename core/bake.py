@@ -36,6 +36,7 @@ from .pipeline import (check_result, colours, form_factors, gathered_incident, m
                        node_arrays, solve, with_world)
 from .progress import Monitor
 from .reciprocity import make_reciprocal
+from .recolour import recoloured, regathered
 from .refine import refine_mask
 from .rows import form_factor_matrix
 from .settings import BakeSettings
@@ -347,9 +348,13 @@ def relight(result, *, reflectance=None, emission=None, back_emission=None, ligh
     if "lights" in changes or (("emission" in changes or "back_emission" in changes) and (
             (state.direct is not None and state.direct.emitters is not None)
             or exact_materials(new_scene, st.exact_direct, st.resolution).any())):
-        # The exact emitters' and the lights' light is kept summed at every point: it is cast
-        # again, and the gathers that hold it are made again (the form factors are kept).
-        state = dataclasses.replace(state, direct=None, gather=None)
+        # The exact emitters' and the lights' light is kept summed at every point. Only their
+        # power or colour changed: it is recoloured there from the kept shadow rays
+        # (core.recolour). Otherwise it is cast again, and the gathers that hold it are made
+        # again (the form factors are kept).
+        direct = recoloured(state, new_scene)
+        gather = None if direct is None else regathered(state.gather, state.direct, direct)
+        state = dataclasses.replace(state, direct=direct, gather=gather)
     with parallel.using(st.workers, cancel):
         if state.store is None:     # a matrix-free bake kept no form factors
             monitor.stage(*_STAGES["patches"])

@@ -27,6 +27,8 @@ ceiling, or hundreds of faces, is left to the hemicube, which sees a large sourc
 here grows with points x faces).
 """
 
+import copy
+
 import numpy as np
 
 from .exact import bilinear, gauss_square, pair_form_factor, point_polygon_form_factor
@@ -214,6 +216,30 @@ class Emitters:
 
     def __len__(self):
         return int(self.face.size)
+
+    def recoloured(self, scene, materials):
+        """These emitters at the emission of ``scene`` (the same geometry), or None.
+
+        ``materials``: the new scene's exact materials (:func:`exact_materials`). None when a
+        face would be lit exactly that is not one of these lights, or a face among them would
+        emit from a side it did not (new lights), or keep emitting without being lit exactly.
+        """
+        materials = np.asarray(materials, dtype=bool)
+        mat = scene.face_materials[self.faces]
+        front = np.any(np.asarray(scene.emission)[mat] > 0, axis=1)
+        back = np.any(np.asarray(scene.back_materials()[1])[mat] > 0, axis=1)
+        chosen = np.flatnonzero(materials[scene.face_materials] & (scene.face_areas > 0))
+        had_front = np.isin(self.faces, self.face[self.sign > 0])
+        had_back = np.isin(self.faces, self.face[self.sign < 0])
+        if not np.all(np.isin(chosen, self.faces)) or np.any(front & ~had_front) \
+                or np.any(back & ~had_back) or np.any((front | back) & ~materials[mat]):
+            return None
+        slot = self._slot
+        le = np.asarray(scene.emission, dtype=np.float64)[mat[slot]]
+        be = np.asarray(scene.back_materials()[1], dtype=np.float64)[mat[slot]]
+        new = copy.copy(self)
+        new.colour = np.where(self.sign[:, None] > 0, le, be)
+        return new
 
     def unshadowed(self, origin, normals):
         """Per light: (n,) ``pi F`` from the points ``origin`` facing ``normals`` to the side of

@@ -40,12 +40,16 @@ rest cast ``samples`` more. Deterministic: the sample pattern is a
 fixed spiral, turned per point by a hash of the point's position.
 """
 
+import copy
+import dataclasses
+
 import numpy as np
 
 from .exact import bilinear, gauss_square, ray_triangles
 from .geometry import unit_frames
 from .light_list import make_lights
 from .raycast import any_hit, build_bvh
+from .shadow_memo import ShadowMemo, point_keys
 from .sky import Sky
 
 
@@ -84,6 +88,34 @@ LUMA = np.array([0.2126, 0.7152, 0.0722])
 #: A light's centre-visibility bit per light, in the bits above the emitter samples' bits
 #: (core.criteria): lights beyond this many share bits (modulo).
 VISIBILITY_BITS = 40
+
+
+def same_geometry(a, b):
+    """Whether Lights ``a`` and ``b`` differ at most in power and colour (``intensity``,
+    ``sun_irradiance``) and names: the same shadows, cones and distributions."""
+    if len(a) != len(b) or a.n_points != b.n_points:
+        return False
+    for f in dataclasses.fields(a):
+        if f.name not in ("names", "intensity", "sun_irradiance") \
+                and not _same(getattr(a, f.name), getattr(b, f.name)):
+            return False
+    return True
+
+
+def _same(x, y):
+    if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
+        return np.array_equal(x, y)
+    if isinstance(x, (tuple, list)) and isinstance(y, (tuple, list)):
+        return len(x) == len(y) and all(_same(u, v) for u, v in zip(x, y))
+    if dataclasses.is_dataclass(x) and type(x) is type(y):
+        return all(_same(getattr(x, f.name), getattr(y, f.name))
+                   for f in dataclasses.fields(x))
+    if x is y:
+        return True
+    if hasattr(x, "__dict__") and type(x) is type(y):
+        return vars(x).keys() == vars(y).keys() and all(_same(vars(x)[k], vars(y)[k])
+                                                        for k in vars(x))
+    return x == y
 
 
 def spot_factor(cos_angle, cos_half, smooth):
@@ -158,9 +190,35 @@ class DirectLight:
         self.culled = 0                     # (point, light) pairs that cast no shadow rays
         self.min_size = float(min_size)
         self._patch_cache = None
+        #: Every shadow ray's result (core.shadow_memo), for :meth:`recoloured` copies.
+        self.memo = ShadowMemo(len(self))
+        self._replay = False
 
     def __len__(self):
         return len(self.lights) + (0 if self.emitters is None else len(self.emitters))
+
+    def recoloured(self, lights, emitters=None):
+        """This direct light with its lights at another power or colour, or None.
+
+        ``lights``: :class:`core.light_list.Lights` that differ from :attr:`lights` in
+        ``intensity`` and ``sun_irradiance`` only (names aside); ``emitters``: the exact
+        emitters at their new emission (:meth:`core.emitters.Emitters.recoloured`), or None if
+        there are none. The copy reads this one's shadow rays back (:attr:`memo`) and casts
+        only the pairs never cast, so it gives what a fresh cast gives. None when anything
+        else differs: the lights must be cast again.
+        """
+        lights = lights if lights is not None else make_lights([])
+        if (emitters is None) != (self.emitters is None) \
+                or (emitters is not None and len(emitters) != len(self.emitters)) \
+                or not same_geometry(self.lights, lights):
+            return None
+        new = copy.copy(self)
+        new.lights, new.emitters = lights, emitters
+        new._colours = np.concatenate([lights.intensity, lights.sun_irradiance,
+                                       np.zeros((0, 3)) if emitters is None
+                                       else emitters.colour]).reshape(-1, 3)
+        new._patch_cache, new.rays, new.culled, new._replay = None, 0, 0, True
+        return new
 
     def incident(self, points, normals, *, samples=None, bits=False):
         """Irradiance / pi at ``points`` facing ``normals`` (n, 3): the radiance-equivalent that
@@ -256,27 +314,44 @@ class DirectLight:
             unshadowed += [(f, f.copy(), None, None, size)
                            for f, size in zip(em.unshadowed(origin, normals), em.size)]
         culled = self._culled(unshadowed)
+        m = len(unshadowed)
+        # Shadow rays already cast (core.shadow_memo): read back by a recoloured copy.
+        rows, keys = point_keys(points, normals, k)
+        entry = self.memo.find(rows, keys, k) if self._replay else np.full(n, -1)
+        cast_frac, cast_clear = np.full((n, m), np.nan), np.zeros((n, m), dtype=bool)
         for j, (bare, scale, ldir, dist, size) in enumerate(unshadowed):
             centre = scale > 0
             go = np.flatnonzero(centre & ~culled[:, j])
             self.culled += int(np.count_nonzero(centre & culled[:, j]))
+            if go.size and self._replay:
+                kept = np.full(go.size, np.nan)
+                has = entry[go] >= 0
+                kept[has] = self.memo.frac[entry[go][has], j]
+                known = ~np.isnan(kept)
+                hit = go[known]
+                scale[hit] *= kept[known]
+                centre[hit] = self.memo.clear[entry[hit], j]
+                go = go[~known]
+            frac = None
             if j >= len(lt):                        # an exact emitter (core.emitters)
                 if go.size:
                     rays = k if size >= self.min_size else 1
                     frac, clear = self.emitters.visible(j - len(lt), origin[go], normals[go],
                                                         rays, turn[go], self._blocked)
-                    scale[go] *= frac
-                    centre[go] = clear
-                yield j, bare, scale, centre
-                continue
-            if go.size and lt.shadow[j] and np.any(self._colour(j) > 0):
+            elif go.size and lt.shadow[j] and np.any(self._colour(j) > 0):
                 penumbra = size if dist is not None else size * self.extent
                 rays = k if size > 0 and penumbra >= self.min_size else 1
                 frac, clear = self._visible(origin[go], ldir[go], dist if dist is None
                                             else dist[go], size, rays, turn[go])
+            if frac is not None:
                 scale[go] *= frac
                 centre[go] = clear
+                cast_frac[go, j], cast_clear[go, j] = frac, clear
             yield j, bare, scale, centre
+        new = entry < 0
+        self.memo.add(rows[new], keys[new], k, cast_frac[new], cast_clear[new])
+        if not new.all():
+            self.memo.update(entry[~new], cast_frac[~new], cast_clear[~new])
 
     def _visible(self, origin, ldir, dist, size, k, turn):
         """Visible fraction (n,) of a light of radius (angle tangent) ``size`` and whether the

@@ -114,9 +114,8 @@ def build_parser(need_input):
                    help="after the bake, multiply light group NAME's light by FACTOR before "
                         "saving (repeatable; groups: each emissive material, each point, spot "
                         "and sun light by its object's name, 'World', or Blender's light "
-                        "groups; on the radiosity mesh the lights and the world are one group, "
-                        "'Lights'; the report lists them). A weighted sum of each group's own "
-                        "solution (one solve or cast per group): no new bake")
+                        "groups; the report lists them). A weighted sum of each group's own "
+                        "solution (one solve per group): no new bake")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="run the bake's hemicube calls on a Dask distributed cluster: a "
                         "scheduler's address (tcp://host:8786), a scheduler file (.json, on "

@@ -12,11 +12,8 @@ import numpy as np
 
 from . import surfaces
 
-#: Group names of the world, and on the radiosity mesh of the point, spot and sun lights together
-#: (with the world, if any), outside a Blender light group.
+#: Group name of the world outside a Blender light group.
 WORLD = "World"
-LIGHTS = "Lights"
-LIGHTS_AND_WORLD = "Lights and World"
 
 
 @dataclass
@@ -86,8 +83,7 @@ def units(bake_input, scene, lights=False):
     ``scene``: the Blender scene (its world's light group). ``lights``: the core Lights now
     (default: the bake's). Objects that all sit in one Blender light group take its name; a
     name of one's own (a material's, a light object's, "World") that a light group or another
-    unit already uses gets its kind appended, so only Blender's light groups merge. On the
-    radiosity mesh the lights and the world are one unit (see the module docstring)."""
+    unit already uses gets its kind appended, so only Blender's light groups merge."""
     core_scene, arrays = bake_input.scene, bake_input.extraction.arrays
     if lights is False:
         lights = core_scene.lights
@@ -118,11 +114,6 @@ def units(bake_input, scene, lights=False):
             raw.append((lightgroup({light}), light, "light", None, (j,), False))
     if world:
         raw.append((world_group, WORLD, "world", None, (), True))
-    sources = [r for r in raw if r[3] is None]
-    if bake_input.settings.output_mode == "mesh" and len({r[0] or r[1:3] for r in sources}) > 1:
-        raw = [r for r in raw if r[3] is not None] + [
-            ("", LIGHTS_AND_WORLD if world else LIGHTS, "lights", None,
-             tuple(range(len(lights))) if shining else (), world)]
     reserved, owner, out = {r[0] for r in raw if r[0]}, {}, {}
     for group, name, kind, materials, js, w in raw:
         if not group:

@@ -11,18 +11,18 @@ again.
   strength and colour and the point, spot and sun lights changed, it stops (bake again). New
   emission goes through ``core.relight`` (a new solve on the kept form factors). The lights'
   direct light is kept summed in the bake: lights scaled alike (one factor per colour channel)
-  add the lights' own solution times the factor - 1, no shadow ray; lights changed apart,
-  moved, added or removed are cast again (``core.relight(lights=)``: shadow rays and gathers
-  again, the form factors kept).
+  add the lights' own solution times the factor - 1; lights whose power or colour changed apart
+  are relit by ``core.relight(lights=)``, which reads the bake's shadow rays back and keeps the
+  gathers and the radiosity mesh (:mod:`core.recolour`: one solve); lights moved, added or
+  removed are cast again (shadow rays and gathers again, the form factors kept).
 * **Light groups** (:func:`mix`): the solve is linear in the light, so a mix is the light with
   every group at 1 plus each weighted group's own solution times (its weight - 1), no solve
   once that solution is kept. A group is each emissive material (area lights are emissive
   polygons), each point, spot and sun light (named after its object) and the world ("World");
   Blender's light groups (``Object.lightgroup``, ``World.lightgroup``) merge what they hold. A
-  group's own solution is made when it is first weighted: a solve for a material, a cast of
-  that light alone for a light (``core.relight(lights=)``), a cast with no light for the world.
-  On the radiosity mesh ('mesh' output) such a cast meshes again (the core keeps the lights'
-  direct light summed at the mesh's points), so there the lights and the world stay one group.
+  group's own solution is made when it is first weighted: a solve for a material, that light
+  alone for a light (``core.relight(lights=)`` with the others at power 0: its shadow rays read
+  back, one solve), no light for the world. On the radiosity mesh too: the mesh is kept.
 
 The colours are written by ``job.apply``, exactly as a bake writes them.
 """
@@ -228,8 +228,8 @@ def _alone(lights, index):
 
 
 def _cast(entry, index):
-    """The solution of the kept lights ``index`` alone with the world (if any), no emission,
-    cast again (``core.relight(lights=)``: shadow rays and gathers; the form factors kept)."""
+    """The solution of the kept lights ``index`` alone with the world (if any), no emission
+    (``core.relight(lights=)``: the bake's shadow rays read back, one solve)."""
     relit = _relit(entry, *_dark(entry), lights=_alone(entry.lights_ref, index))
     _same_mesh(entry, relit)
     return Solution.of(relit, _surfaces(entry))

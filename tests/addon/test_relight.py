@@ -498,9 +498,9 @@ def test_world_and_each_light_are_groups_of_their_own_and_relight_keeps_the_worl
     assert_near(no_bulb, fresh(*objects), baked)
 
 
-def test_group_names_are_unique_and_the_radiosity_mesh_keeps_the_lights_together(package):
+def test_group_names_are_unique_on_either_output(package):
     # Two objects of one light datablock are two groups; a light named as a material is told
-    # apart. On the radiosity mesh a light alone would mesh again: one group of lights.
+    # apart. On the radiosity mesh too: a light alone keeps the mesh (core.recolour).
     walls, lamp, bulb = room()
     twin = bpy.data.objects.new("lamp", bulb.data)    # the data of "Bulb", a material's name
     twin.location = (-0.7, 0.6, 0.2)
@@ -509,7 +509,30 @@ def test_group_names_are_unique_and_the_radiosity_mesh_keeps_the_lights_together
     assert [g.name for g in bpy.context.scene.radiosity_groups] == ["lamp", "Bulb",
                                                                     "lamp (light)"]
     bake(output_mode="MESH")
-    assert [g.name for g in bpy.context.scene.radiosity_groups] == ["lamp", "Lights"]
+    assert [g.name for g in bpy.context.scene.radiosity_groups] == ["lamp", "Bulb",
+                                                                    "lamp (light)"]
+
+
+def test_a_light_group_on_the_radiosity_mesh_equals_relight_with_that_light_off(package,
+                                                                                fixed_cubes):
+    # Oracle: Relight after the bulb's power is set to 0 in the scene (the spot's light alone,
+    # one solve on the kept mesh), against the mix with the Bulb group at 0 (the bake minus the
+    # bulb's own solution). Both keep the radiosity mesh; they agree within two solves and
+    # CULL (the bake culls, the bulb alone does not).
+    objects, (bulb, spot) = two_lights()
+    bake(output_mode="MESH", element_levels=2)
+    full = [colours_and_lux(o) for o in objects]
+    groups = bpy.context.scene.radiosity_groups
+    assert [g.name for g in groups] == ["Bulb", "Spot"]
+    groups["Bulb"].strength = 0.0
+    spot_only = [colours_and_lux(o) for o in objects]
+    groups["Bulb"].strength = 1.0
+    bulb.data.energy = 0.0
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    relit = [colours_and_lux(o) for o in objects]
+    assert [c.shape for c, _ in relit] == [c.shape for c, _ in full]
+    assert_near(spot_only, relit, full)
+    assert not np.allclose(spot_only[1][0], full[1][0], rtol=0.05)
 
 
 def test_a_group_change_makes_that_group_alone_once(package, monkeypatch):
