@@ -55,6 +55,18 @@ class Elements:
         self.patches, self.parent, self.computed = patches, parent, computed
         self.rows, self.levels, self.direct = rows, levels, direct
 
+    def points(self):
+        """(K, 3) centres and (K, 3) normals of the ``computed`` nodes, each facing the side it
+        gathered on (where :attr:`direct` was taken)."""
+        E = self.parent.size
+        ids = self.computed % E
+        sign = np.where(self.computed >= E, -1.0, 1.0)[:, None]
+        return self.patches.centres[ids], sign * self.patches.normals[ids]
+
+    def with_direct(self, direct):
+        """These elements with ``direct`` (K, 3) in place of :attr:`direct`."""
+        return Elements(self.patches, self.parent, self.computed, self.rows, self.levels, direct)
+
     def node_radiance(self, scene, node_radiance):
         """Radiance of the elements' 2E nodes from the solved patches' (2P, 3) node radiance.
 

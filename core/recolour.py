@@ -14,7 +14,9 @@ import dataclasses
 
 import numpy as np
 
+from .adaptive import AdaptiveState
 from .emitters import exact_materials
+from .pipeline import Gather
 
 
 def recoloured(state, scene):
@@ -36,26 +38,18 @@ def recoloured(state, scene):
 
 def regathered(gather, old, new):
     """The kept gather (a :class:`core.adaptive.AdaptiveState` or :class:`core.pipeline.Gather`)
-    with ``new``'s direct light in place of ``old``'s at its points; None if it cannot say where
-    its points are (gathered again)."""
-    if gather is None:
-        return None
+    with ``new``'s direct light in place of ``old``'s at its points; None for anything else
+    (gathered again)."""
     same = old.recoloured(old.lights, old.emitters)
     elements = getattr(gather, "elements", None)
     if elements is not None and elements.direct is not None:
-        E = elements.parent.size
-        ids, side = elements.computed % E, elements.computed // E
-        sign = np.where(side > 0, -1.0, 1.0)[:, None]
-        moved = _moved(elements.direct, elements.patches.centres[ids],
-                       sign * elements.patches.normals[ids], same, new)
-        elements = dataclasses.replace(elements, direct=moved) \
-            if dataclasses.is_dataclass(elements) else _copy_with(elements, direct=moved)
-    if hasattr(gather, "cast"):                                  # core.adaptive.AdaptiveState
+        elements = elements.with_direct(_moved(elements.direct, *elements.points(), same, new))
+    if isinstance(gather, AdaptiveState):
         direct = gather.direct.copy()
         at = np.flatnonzero(gather.cast)
         direct[at] = _moved(direct[at], gather.points[at], gather.normals[at], same, new)
-        return type(gather)(**{**gather.__dict__, "direct": direct, "elements": elements})
-    if hasattr(gather, "groups"):                                # core.pipeline.Gather
+        return AdaptiveState(**{**gather.__dict__, "direct": direct, "elements": elements})
+    if isinstance(gather, Gather):
         direct = gather.direct
         if direct is not None:
             direct = _moved(direct, gather.groups.points, gather.groups.normals, same, new)
@@ -70,9 +64,3 @@ def _moved(kept, points, normals, old, new):
     if old.world is None and old.sky is None:
         return light
     return light + np.maximum(kept - old.incident(points, normals), 0.0)
-
-
-def _copy_with(obj, **kw):
-    out = object.__new__(type(obj))
-    out.__dict__.update({**obj.__dict__, **kw})
-    return out

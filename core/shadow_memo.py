@@ -62,11 +62,8 @@ class ShadowMemo:
         self.clear = np.zeros((0, self.m), dtype=bool)
         self._pending = []
         self.full = False
-
-    @property
-    def nbytes(self):
-        arrays = [self.keys, self.rows, self.samples, self.frac, self.clear]
-        return sum(a.nbytes for a in arrays) + sum(a.nbytes for p in self._pending for a in p)
+        #: Bytes held (the table and the points added since it was last sorted).
+        self.nbytes = 0
 
     def find(self, rows, keys, samples):
         """(n,) int64: the entry of each point (-1: none)."""
@@ -86,10 +83,12 @@ class ShadowMemo:
             return
         part = (keys[keep], rows[keep], np.full(int(keep.sum()), int(samples), dtype=np.int64),
                 frac[keep], clear[keep])
-        if self.nbytes + sum(a.nbytes for a in part) > self.budget:
+        size = sum(a.nbytes for a in part)
+        if self.nbytes + size > self.budget:
             self.full = True
             return
         self._pending.append(part)
+        self.nbytes += size
 
     def update(self, entries, frac, clear):
         """Fill in the pairs newly cast at points already kept (``entries``: their index)."""
@@ -114,3 +113,5 @@ class ShadowMemo:
         self.samples = np.concatenate([self.samples, *parts[2]])[order]
         self.frac = np.concatenate([self.frac, *parts[3]])[order]
         self.clear = np.concatenate([self.clear, *parts[4]])[order]
+        self.nbytes = sum(a.nbytes for a in (self.keys, self.rows, self.samples, self.frac,
+                                              self.clear))
