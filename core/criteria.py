@@ -38,6 +38,14 @@ STEEP_FLOOR = 0.25
 #: scaled with it) was never split along its contacts (tests/core/test_fuzz.py).
 CONTACT_ELEMENT = 5.0
 
+#: A leaf is taken as linear from its parent's split-made points (no contrast split; see
+#: :func:`per_leaf_scores`) only while its brightest corner is at most this many times its
+#: darkest. One midpoint cannot tell a line from an S: an edge of light (a lamp's outline above a
+#: ceiling, a penumbra) centred on it passes the test at its inflection, and a bake that happened
+#: to centre one there kept 37 coarse faces where a neighbouring seed made 87, 7.5 % too bright
+#: beside the lamp (bench/stability, flipped normals, 2026-11-27).
+LINEAR_RATIO = 2.0
+
 #: Alone points lie within the contacts' tolerance of a contact line; lines are tested against
 #: points in chunks of this many (point, line) pairs.
 PAIR_CHUNK = 2_000_000
@@ -288,7 +296,8 @@ def per_leaf_scores(tree, conf, corner_y, corner_vis, corner_alone, emitting_lea
     ``corner_interp`` (C,) float, optional: :func:`interpolation_errors` at each corner (NaN
     where unknown). A leaf with a split-made point among its corners and no interpolation error
     above ``contrast`` there is not split for contrast: the light across its parent was linear,
-    which the output's interpolation already draws.
+    which the output's interpolation already draws. Not beyond :data:`LINEAR_RATIO` between
+    its corners, where one midpoint cannot vouch for a line.
     """
     E = tree.leaves.shape[0]
     hi = _per_leaf(conf, corner_y, E, np.maximum, -np.inf)
@@ -301,7 +310,9 @@ def per_leaf_scores(tree, conf, corner_y, corner_vis, corner_alone, emitting_lea
     if corner_interp is not None:
         known = np.isfinite(corner_interp)
         interp = _per_leaf(conf, np.where(known, corner_interp, -1.0), E, np.maximum, -1.0)
-        steep = np.where((interp >= 0) & (interp <= settings.contrast), 0.0, diff)
+        linear = (interp >= 0) & (interp <= settings.contrast) \
+            & (diff <= 1.0 - 1.0 / LINEAR_RATIO)
+        steep = np.where(linear, 0.0, diff)
     score = np.where(steep > settings.contrast, area * steep / settings.contrast, 0.0)
     vmax = _per_leaf(conf, corner_vis, E, np.maximum, np.int64(-1))
     vmin = _per_leaf(conf, corner_vis, E, np.minimum, np.int64(np.iinfo(np.int64).max))

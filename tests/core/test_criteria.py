@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from core import BakeSettings, scene_from_polygons
-from core.criteria import (STEEP_FLOOR, cavity_mask, interpolation_errors, per_leaf_scores,
-                           smallest_split)
+from core.criteria import (LINEAR_RATIO, STEEP_FLOOR, cavity_mask, interpolation_errors,
+                           per_leaf_scores, smallest_split)
 from core.geometry import patch_extents
 from core.hierarchy import ElementTree
 from core.patches import make_patches
@@ -75,7 +75,7 @@ def test_the_rule_follows_the_contrast_setting():
     # error exceeds the setting and the children are split.
     def bent(p):
         x = p[:, 0] / SIZE
-        return 1.0 + 2.0 * x + 0.4 * x * (1 - x)
+        return 1.0 + 1.2 * x + 0.3 * x * (1 - x)
 
     interp, loose, without = scores(bent, contrast=0.1)
     assert 0.02 < np.nanmax(interp) < 0.1
@@ -83,6 +83,30 @@ def test_the_rule_follows_the_contrast_setting():
     assert np.all(loose == 0)
     _, tight, _ = scores(bent, contrast=0.02)
     assert np.all(tight > 0)
+
+
+def test_an_edge_of_light_centred_on_the_midpoints_is_still_split():
+    # A lamp's outline projected across the floor: bright (1) on one side, dark (0.1) on the
+    # other, the step 0.3 m wide and centred on the middle. At its inflection the parent's edge
+    # midpoints sit exactly on the line between their ends, so the midpoint test alone calls it
+    # linear (interpolation error 0). Linear interpolation across the dark-side children is
+    # far off (at x = 3 m it draws 0.33 where the light is 0.1): with their corners more than
+    # LINEAR_RATIO apart they are split for contrast, as without the rule.
+    def edge(p):
+        return 0.1 + 0.9 / (1.0 + np.exp((p[:, 0] - SIZE / 2) / 0.3))
+
+    interp, with_rule, without = scores(edge)
+    np.testing.assert_allclose(interp[np.isfinite(interp)], 0.0, atol=1e-9)
+    assert np.all(without > 0)
+    tree, _ = split_floor()
+    corners = tree.points[tree.leaves[tree.leaf_face == 0]]       # (4, 4, 3): quads
+    dark = corners[:, :, 0].mean(axis=1) > SIZE / 2
+    assert dark.sum() == 2
+    np.testing.assert_array_equal(with_rule[dark], without[dark])
+    assert np.all(with_rule[dark] > 0)
+    # The bright side's children (0.55 to 1: within the ratio) keep the rule: that one midpoint
+    # cannot see the step there is the rule's known limit.
+    assert np.all(with_rule[~dark] == 0)
 
 
 def test_steep_leaves_at_a_contact_split_below_min_element():

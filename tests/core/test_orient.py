@@ -193,3 +193,25 @@ def test_flipped_floor_under_a_board_is_split_as_modelled():
     m0, m1, mf = (_face_means(r, F)[lit] for r in (r0, r1, rf))
     noise = np.abs(m1 - m0).max() / m0.mean()
     assert np.abs(mf - m0).max() / m0.mean() <= NOISE_FACTOR * max(noise, 1e-3)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_flipped_faces_leave_the_lamps_outline_on_the_ceiling_as_modelled(seed):
+    # The stability report's room (bench/stability): a 1 m lamp 0.3 m under the ceiling lights
+    # it from its back, and its outline falls off steeply across the ceiling. Reversing other
+    # faces changes only the order of the hemicubes' draws; a refinement that trusted one
+    # midpoint on that S-shaped edge (core.criteria.LINEAR_RATIO) kept the ceiling beside the
+    # lamp coarse in some of those draws and 7.5 % too bright there: the worst face 1.4 to
+    # 1.9 % of the room's mean off the room as modelled, in 4 of 16 flipped bakes at seeds 0 to
+    # 3. Tolerance: 0.6 %, twice the worst of those 16 bakes with the ratio (0.32 %).
+    from bench.stability.scenes import room
+
+    scene0, groups = room()
+    lamp = set(groups["lamp"])
+    keep = np.array([f not in lamp for f in range(scene0.n_faces)])
+    m0 = _face_means(bake(scene0, BakeSettings(seed=seed)), scene0.n_faces)[keep]
+    for names in (["floor"], ["ceiling", "wall y0", "wall y1", "lamp"]):
+        faces = [f for g in names for f in groups[g]]
+        scene = _flip(scene0, faces)
+        mf = _face_means(bake(scene, BakeSettings(seed=seed)), scene.n_faces)[keep]
+        assert np.abs(mf - m0).max() / m0.mean() <= 0.006, names
