@@ -12,8 +12,9 @@ memory (radiosity_addon.relight.kept_bytes).
 (:func:`generated`: desks, four point lights, a spot, emissive ceiling panels) baked to vertices
 with the patch size that gives about that many patches; its Relight scales the panels only (one
 new solve), a second one the lights too (their own solution, one more solve, once). Relights
-print their CPU seconds too (``*_cpu_s``, this process: fairer on a busy machine) and whether
-the bake's reciprocity scaling was reused (``relight_balancing_reused``: no Sinkhorn sweep).
+print their CPU seconds too (``*_cpu_s``, this process: fairer on a busy machine), whether the
+bake's reciprocity scaling was reused (no Sinkhorn sweep) and the solver's sweeps
+(``relight_reused``).
 
 Run: ``.venv/bin/python bench/bench_relight.py [--scenes cornell_box office generated]
 [--patches 10000]``. Prints one JSON line per scene (seconds per step, the kept MB, the groups).
@@ -120,9 +121,11 @@ def _timings():
 
 
 def _reused():
-    """Whether the last relight reused the bake's reciprocity scaling (no Sinkhorn sweep)."""
+    """Whether the last relight reused the bake's reciprocity scaling (no Sinkhorn sweep), and
+    its solver's sweeps."""
     report = json.loads(bpy.context.scene.radiosity.last_report)
-    return bool(report.get("reciprocity", {}).get("reused", False))
+    return dict(balancing=bool(report.get("reciprocity", {}).get("reused", False)),
+                iterations=report.get("iterations"))
 
 
 def run(name, patches=10000, exact_direct=None):
@@ -149,7 +152,7 @@ def run(name, patches=10000, exact_direct=None):
         extra["relight_emission_s"] = round(time.perf_counter() - t0, 3)
         extra["relight_emission_cpu_s"] = round(time.process_time() - c0, 3)
         extra["relight_emission_core"] = _timings()
-        extra["relight_balancing_reused"] = _reused()
+        extra["relight_reused"] = _reused()
     for light in bpy.data.lights:
         light.energy *= 2.0
     t0, c0 = time.perf_counter(), time.process_time()

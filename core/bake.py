@@ -483,7 +483,6 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
         iterations=int(sol.result.iterations),
         residual=float(sol.result.residual),
         converged=bool(sol.result.converged),
-        solver_blocks_reused=bool(sol.result.stats.get("inverses_reused", False)),
         timings=timings,
         energy=energy,
         form_factor_bytes=int(sol.store.nbytes if sol.store is not None else 0),

@@ -322,16 +322,11 @@ class KeptBalance:
     emission or the reflectance: a relight with the same solved nodes and the same stored rows
     rebuilds the reciprocal matrix from it (:func:`core.reciprocity.rebalance`) instead of
     iterating again. Holds 8 bytes per solved node (and per unscaled node); ``active`` is the
-    solve's own array and ``batches`` the store's own, shared, not copied. With Gauss-Seidel it
-    also keeps the solve's block inverses, which depend on the reflectance too (``rho``): 1.5 kB
-    per solved node (3 channels x GS_BLOCK_ROWS float64), reused while the reflectance is the
-    same (a relight of the light)."""
+    solve's own array and ``batches`` the store's own, shared, not copied."""
 
     balance: object
     active: np.ndarray          # (2P,) bool: the solved nodes, the rows and columns
     batches: tuple              # the RowStore batches the matrix was assembled from
-    rho: np.ndarray = None      # (n, 3) the reflectance ``inverses`` were made for
-    inverses: list = None       # Gauss-Seidel's block inverses of that matrix and ``rho``
 
     def fits(self, active, store, dtype):
         """True when the matrix of ``active`` from ``store`` in ``dtype`` is the one balanced:
@@ -392,14 +387,8 @@ def _solve_dense(ff, nodes, settings, solver, monitor, kept=None):
         res = solve_jacobi(F, rho[idx], le[idx], max_iterations=settings.max_iterations,
                            **common)
     elif solver == "gauss_seidel":
-        # A relight of the emission alone solves the same matrix: its block inverses are kept.
-        same = balanced is not None and balanced is kept and kept.inverses is not None \
-            and np.array_equal(kept.rho, rho[idx])
         res = solve_gauss_seidel(F, rho[idx], le[idx], max_iterations=settings.max_iterations,
-                                 inverses=kept.inverses if same else None, **common)
-        inverses = res.stats.pop("inverses", None)
-        if balanced is not None and inverses is not None and not same:
-            balanced = dataclasses.replace(balanced, rho=np.array(rho[idx]), inverses=inverses)
+                                 **common)
     else:
         res = solve_progressive(None, areas[idx], rho[idx], le[idx], F=F,
                                 max_shots=settings.max_iterations * max(n_a, 1), **common)

@@ -303,7 +303,7 @@ def solve_jacobi(F, rho, le, *, tol=DEFAULT_TOLERANCE, max_iterations=DEFAULT_MA
 
 
 def solve_gauss_seidel(F, rho, le, *, tol=DEFAULT_TOLERANCE, max_iterations=DEFAULT_MAX_ITERATIONS,
-                       monitor=None, block=GS_BLOCK_ROWS, inverses=None):
+                       monitor=None, block=GS_BLOCK_ROWS):
     """Block Gauss-Seidel with exactly solved diagonal blocks.
 
     Rows are split into consecutive blocks K of ``block`` rows; a sweep sets, block after block,
@@ -325,15 +325,10 @@ def solve_gauss_seidel(F, rho, le, *, tol=DEFAULT_TOLERANCE, max_iterations=DEFA
         Polled between blocks when a poll is due.
     block : int
         Rows per diagonal block (1 = classic point Gauss-Seidel).
-    inverses : list of (3, b, b) float64, optional
-        The block inverses of an earlier solve of this ``F``, ``rho`` and ``block`` (its
-        ``stats['inverses']``): a relight that changes the emission only needs no new ones.
-        Checked against the blocks' sizes only; the caller vouches for ``F`` and ``rho``.
 
     Returns
     -------
     SolveResult
-        ``stats['inverses']``: the block inverses, for a later solve of the same system.
     """
     F, rho, le = _check_system(F, rho, le)
     tol = _check_tol(tol)
@@ -344,11 +339,8 @@ def solve_gauss_seidel(F, rho, le, *, tol=DEFAULT_TOLERANCE, max_iterations=DEFA
     if n == 0 or not np.any(le):
         return SolveResult(np.zeros((n, 3)), 0, 0.0, True, "gauss_seidel")
     bounds = [(s, min(s + block, n)) for s in range(0, n, block)]
-    if inverses is not None and (len(inverses) != len(bounds) or any(
-            inv.shape != (3, e - s, e - s) for inv, (s, e) in zip(inverses, bounds))):
-        raise ValueError("inverses do not fit this system's blocks: they are from another solve")
-    made, inverses = inverses is None, list(inverses or [])
-    for s, e in bounds if made else ():
+    inverses = []
+    for s, e in bounds:
         Fkk = F[s:e, s:e].astype(np.float64)
         # (3, b, b): I - rho_c F_KK for each channel, inverted as one batch.
         A = -rho[s:e].T[:, :, None] * Fkk[None]
@@ -381,8 +373,7 @@ def solve_gauss_seidel(F, rho, le, *, tol=DEFAULT_TOLERANCE, max_iterations=DEFA
         if residual <= tol:
             break
     monitor.update(1.0 if residual <= tol else best, "solved (Gauss-Seidel)")
-    return SolveResult(L, it, residual, residual <= tol, "gauss_seidel",
-                       dict(inverses=inverses, inverses_reused=not made))
+    return SolveResult(L, it, residual, residual <= tol, "gauss_seidel")
 
 
 # ----------------------------------------------------------------------------- progressive
