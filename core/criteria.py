@@ -41,9 +41,9 @@ CONTACT_ELEMENT = 5.0
 #: A leaf is taken as linear from its parent's split-made points (no contrast split; see
 #: :func:`per_leaf_scores`) only while its brightest corner is at most this many times its
 #: darkest. One midpoint cannot tell a line from an S: an edge of light (a lamp's outline above a
-#: ceiling, a penumbra) centred on it passes the test at its inflection, and a bake that happened
-#: to centre one there kept 37 coarse faces where a neighbouring seed made 87, 7.5 % too bright
-#: beside the lamp (bench/stability, flipped normals, 2026-11-27).
+#: ceiling, a penumbra) centred on it passes the test at its inflection: the room of
+#: bench/stability with its floor flipped kept 37 coarse faces beside a lamp's outline where the
+#: room as modelled made 87, and read 7.5 % too bright there (flipped normals, 2026-11-27).
 LINEAR_RATIO = 2.0
 
 #: Alone points lie within the contacts' tolerance of a contact line; lines are tested against

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from core import BakeSettings, scene_from_polygons
-from core.criteria import (LINEAR_RATIO, STEEP_FLOOR, cavity_mask, interpolation_errors,
-                           per_leaf_scores, smallest_split)
+from core.criteria import (STEEP_FLOOR, cavity_mask, interpolation_errors, per_leaf_scores,
+                           smallest_split)
 from core.geometry import patch_extents
 from core.hierarchy import ElementTree
 from core.patches import make_patches
@@ -90,8 +90,8 @@ def test_an_edge_of_light_centred_on_the_midpoints_is_still_split():
     # other, the step 0.3 m wide and centred on the middle. At its inflection the parent's edge
     # midpoints sit exactly on the line between their ends, so the midpoint test alone calls it
     # linear (interpolation error 0). Linear interpolation across the dark-side children is
-    # far off (at x = 3 m it draws 0.33 where the light is 0.1): with their corners more than
-    # LINEAR_RATIO apart they are split for contrast, as without the rule.
+    # far off (at x = 3 m it draws 0.33 where the light is 0.13): with their corners more
+    # than core.criteria.LINEAR_RATIO apart they are split for contrast, as without the rule.
     def edge(p):
         return 0.1 + 0.9 / (1.0 + np.exp((p[:, 0] - SIZE / 2) / 0.3))
 
