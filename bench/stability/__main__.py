@@ -1,6 +1,6 @@
 """Write docs/stability.md: every failure class of issue 11 provoked and measured.
 
-    .venv/bin/python -m bench.stability            # full: about 10 minutes on 2 shared cores
+    .venv/bin/python -m bench.stability            # full: 12 to 31 minutes on 2 shared cores
     .venv/bin/python -m bench.stability --quick    # fewer cases, smaller mesh: about a minute
     .venv/bin/python -m bench.stability --out DIR  # DIR/stability.md and DIR/images/
 
