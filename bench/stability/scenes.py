@@ -91,6 +91,8 @@ def lamp(b, cx, cy, z, size, material, group="lamp"):
 #: The room of classes 2, 3, 4 and 6: W x D x H (m), floor, ceiling, walls, box, lamp
 #: reflectances and the lamp's radiance.
 ROOM = (4.0, 3.0, 2.5)
+#: The room's box: its lowest and highest corners (m), standing on the floor.
+BOX = ((1.0, 1.0, 0.0), (2.0, 2.0, 0.8))
 ROOM_RHO = np.array([[0.7] * 3, [0.8] * 3, [0.4, 0.5, 0.6], [0.5] * 3, [0.0] * 3])
 ROOM_LE = 20.0
 
@@ -109,7 +111,7 @@ def room(*, drop=0.3, fan_walls=0, copy=None, offset=(0.0, 0.0, 0.0), scale=1.0)
     for name, poly in room_walls(W, D, H):
         for tri in (fan(poly, fan_walls) if fan_walls else [poly]):
             b.add(tri, 2, name)
-    b.box((1.0, 1.0, 0.0), (2.0, 2.0, 0.8), 3, "box")
+    b.box(*BOX, 3, "box")
     lamp(b, 2.5, 1.5, H - drop, 1.0, 4)
     if copy is not None:
         rel, flipped = copy
