@@ -49,24 +49,17 @@ def main():
     for node in principled_nodes():
         colour = node.inputs["Base Color"].default_value
         colour[:3] = [c * args.dark for c in colour[:3]]
-    configure = cycles.configure
-    glossy = [0]
-
-    def with_glossy(*a, **k):           # the reference's configure turns glossy bounces off
-        configure(*a, **k)
-        scene.cycles.glossy_bounces = glossy[0]
-    cycles.configure = with_glossy
     objects = cycles.mesh_objects(scene)
     sizes = [len(ob.data.loops) for ob in objects]
+    surfaces = [k for k, ob in enumerate(objects) if "light" not in ob.name.lower()]
     means = {}
     for name, level, roughness, bounces in CASES:
         for node in principled_nodes():
             node.inputs["Specular IOR Level"].default_value = level
             node.inputs["Roughness"].default_value = roughness
-        glossy[0] = bounces
         runs = []
         for seed in (0, 1):
-            corners, seconds = cycles.bake(scene, args.samples, seed)
+            corners, seconds = cycles.bake(scene, args.samples, seed, glossy=bounces)
             parts = np.split(corners, np.cumsum(sizes)[:-1])
             runs.append(np.array([p.mean(axis=0) for p in parts]))
             print(f"{name} seed {seed}: {seconds:.1f} s", flush=True)
@@ -76,11 +69,8 @@ def main():
     for name in ("default", "no_glossy"):
         ratio = means[name] / base
         mid, spread = ratio.mean(axis=0), np.abs(ratio[0] - ratio[1]) / 2
-        surfaces = [k for k, ob in enumerate(objects) if "light" not in ob.name.lower()]
-        for k, ob in enumerate(objects):
-            if k not in surfaces:
-                continue
-            print(f"  {name:9s} {ob.name:12s} " + " ".join(
+        for k in surfaces:
+            print(f"  {name:9s} {objects[k].name:12s} " + " ".join(
                 f"{m:.3f}±{s:.3f}" for m, s in zip(mid[k], spread[k])))
         luma = np.array([0.2126, 0.7152, 0.0722])
         lum = (means[name][:, surfaces] @ luma).sum(axis=1) \

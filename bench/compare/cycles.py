@@ -173,8 +173,9 @@ def principled_material(name, rho, emission):
     return mat
 
 
-def configure(bpy_scene, samples, seed, threads=2, bounces=REFERENCE_BOUNCES):
-    """Set Cycles to reference quality on ``bpy_scene`` (CPU, fixed threads, no clamps)."""
+def configure(bpy_scene, samples, seed, threads=2, bounces=REFERENCE_BOUNCES, glossy=0):
+    """Set Cycles to reference quality on ``bpy_scene`` (CPU, fixed threads, no clamps);
+    ``glossy`` bounces (0: the references' Lambertian materials reflect no glossy light)."""
     if int(samples) < 1:
         raise ValueError("samples must be >= 1; got %r" % samples)
     sc = bpy_scene
@@ -187,7 +188,7 @@ def configure(bpy_scene, samples, seed, threads=2, bounces=REFERENCE_BOUNCES):
     cy.use_adaptive_sampling = False
     cy.max_bounces = bounces
     cy.diffuse_bounces = bounces
-    cy.glossy_bounces = 0
+    cy.glossy_bounces = int(glossy)
     cy.transmission_bounces = 0
     cy.min_light_bounces = 0
     cy.sample_clamp_direct = 0.0
@@ -197,7 +198,7 @@ def configure(bpy_scene, samples, seed, threads=2, bounces=REFERENCE_BOUNCES):
     sc.render.bake.target = "VERTEX_COLORS"
 
 
-def bake(bpy_scene, samples, seed=0, threads=2, bounces=REFERENCE_BOUNCES):
+def bake(bpy_scene, samples, seed=0, threads=2, bounces=REFERENCE_BOUNCES, glossy=0):
     """Bake Cycles' diffuse radiance per corner, emission added.
 
     Parameters
@@ -217,7 +218,7 @@ def bake(bpy_scene, samples, seed=0, threads=2, bounces=REFERENCE_BOUNCES):
         Wall time of the bake call (scene sync, BVH build and path tracing).
     """
     import bpy
-    configure(bpy_scene, samples, seed, threads, bounces)
+    configure(bpy_scene, samples, seed, threads, bounces, glossy)
     objects = mesh_objects(bpy_scene)
     view_layer = bpy.context.view_layer
     for ob in view_layer.objects:

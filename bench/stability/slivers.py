@@ -41,12 +41,11 @@ def samples():
     within OUTLINE of the box's outline are left out (see :data:`OUTLINE`)."""
     W, D, H = scenes.ROOM
     floor = _grid((0, 0, 0), (W, 0, 0), (0, D, 0))
-    (x0, y0, _), (x1, y1, _) = scenes.BOX
-    inside = (floor[:, 0] > x0 - OUTLINE) & (floor[:, 0] < x1 + OUTLINE) \
-        & (floor[:, 1] > y0 - OUTLINE) & (floor[:, 1] < y1 + OUTLINE)
-    deep = (floor[:, 0] > x0 + OUTLINE) & (floor[:, 0] < x1 - OUTLINE) \
-        & (floor[:, 1] > y0 + OUTLINE) & (floor[:, 1] < y1 - OUTLINE)
-    out = {"floor": (floor[~inside | deep], np.array([0, 0, 1.0]))}
+    lo, hi = (np.asarray(c[:2]) for c in scenes.BOX)
+
+    def within(margin):            # inside the box's footprint grown by ``margin``
+        return np.all((floor[:, :2] > lo - margin) & (floor[:, :2] < hi + margin), axis=1)
+    out = {"floor": (floor[~(within(OUTLINE) & ~within(-OUTLINE))], np.array([0, 0, 1.0]))}
     for name, poly in scenes.room_walls(W, D, H):
         n = np.cross(poly[1] - poly[0], poly[3] - poly[0])
         out[name] = (_grid(poly[0], poly[1] - poly[0], poly[3] - poly[0]), n / np.linalg.norm(n))
