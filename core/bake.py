@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .adaptive import coarse_patch_size, mesh_colours
+from .adaptive import coarse_patch_size, mesh_colours, min_element_size
 from .colours import corner_colours
 from .contacts import find_contacts, split_at_contacts
 from .criteria import cavity_mask, face_variation, near_emitter_mask, unlit_late_nodes
@@ -151,6 +151,8 @@ def _bake(scene, settings, progress, cancel):
     if settings.patch_size is None:
         settings = dataclasses.replace(settings, patch_size=0.5 if settings.output_mode == "vertices"
                                        else coarse_patch_size(scene))
+    if settings.min_element is None:
+        settings = dataclasses.replace(settings, min_element=min_element_size(scene))
 
     levels = settings.refine_levels
     level_monitor = _LevelMonitor(progress, cancel, 0, levels + 1)

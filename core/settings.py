@@ -68,10 +68,6 @@ class Setting:
     auto : bool
         ``None`` is allowed and means "chosen by the bake" (the panel shows it as 0, the batch
         option takes ``auto``).
-    auto_value : object, optional
-        What ``None`` becomes when the settings are made (a length in metres that the panel,
-        in scene units, cannot hold as its default: a model in millimetres would read the
-        default as millimetres); without it the bake chooses from the scene.
     doc : str
         More for the API documentation (why the default, what it costs).
     """
@@ -93,7 +89,6 @@ class Setting:
     exposed: bool = False
     doc: str = ""
     auto: bool = False
-    auto_value: object = None
 
     @property
     def is_length(self):
@@ -307,13 +302,14 @@ TABLE = (
     Setting("min_element", "float", None, "Min Element",
             "Radiosity mesh: smallest element edge refinement makes (at an object's foot, where "
             "the light falls steeply, down to a quarter of it); auto (0 in the panel): 0.05 m "
-            "whatever the scene's units", unit="m", low=0,
-            open_low=True, soft=(0.005, 1.0), exposed=True, auto=True, auto_value=0.05,
-            doc="Measured: box shadow 1.35 % with 1118 vertices at 0.05 m, 1.63 % with 547 at "
-                "0.1 m; 0.02 m buys nothing at the default contrast (6571 vertices, 1.35 %). "
-                "Auto, not 0.05 in the panel: the panel's lengths are scene units, and a file "
-                "in millimetres read 0.05 as 0.05 mm (the mesh then refined to its vertex "
-                "budget)."),
+            "whatever the scene's units, finer in a model smaller than 2 m across", unit="m",
+            low=0, open_low=True, soft=(0.005, 1.0), exposed=True, auto=True,
+            doc="Auto: core.adaptive.min_element_size, 0.05 m, at most the scene's bounding "
+                "diagonal / 40. Measured: box shadow 1.35 % with 1118 vertices at 0.05 m, "
+                "1.63 % with 547 at 0.1 m; 0.02 m buys nothing at the default contrast (6571 "
+                "vertices, 1.35 %). Auto, not 0.05 in the panel: the panel's lengths are scene "
+                "units, and a file in millimetres read 0.05 as 0.05 mm (the mesh then refined "
+                "to its vertex budget)."),
     Setting("emitter_levels", "int", 3, "Near Splits",
             "Radiosity mesh: split solve patches near an emitter, this many rounds, until each is "
             "at most 4 times its distance to it, and across thin cavities until each is at most "
@@ -382,8 +378,6 @@ def _docstring():
 def _post_init(self):
     for name, row in BY_NAME.items():
         row.check(getattr(self, name))
-        if getattr(self, name) is None and row.auto_value is not None:
-            object.__setattr__(self, name, row.auto_value)
     if self.sky != "world" and self.method != "hemicube":
         raise SettingsError(f"sky={self.sky!r} needs method='hemicube' (a sky that varies with "
                             f"direction is gathered by the hemicube); got method={self.method!r}")

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from core import BakeSettings, bake
-from core.adaptive import coarse_patch_size
+from core.adaptive import coarse_patch_size, min_element_size
 from core.errors import BakeCancelled
 from core.patches import make_patches
 from core.rows import row_seconds
@@ -111,7 +111,8 @@ class Gate:
         # step of core.bake: used when present, else the estimate counts the unsplit patches).
         split = getattr(importlib.import_module("core.bake"), "_split_near", None)
         if split is not None and settings.output_mode == "mesh":
-            patches = split(scene, patches, settings.min_element, settings.emitter_levels)
+            patches = split(scene, patches, min_element_size(scene, settings.min_element),
+                            settings.emitter_levels)
         return row_seconds(patches, settings.method, settings.resolution, settings.rays) \
             * 2 * len(patches.areas)
 

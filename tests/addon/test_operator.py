@@ -581,7 +581,7 @@ def test_panel_properties_are_the_settings_table(package):
     for name in settings.EXPOSED:      # float32 in Blender: 1e-4 comes back as 9.99999974e-05
         want = getattr(defaults, name)
         # An auto length (0 in the panel) goes to the core as None and resolves there, as in
-        # a bake (min_element: 0.05 m whatever the scene's units).
+        # a bake (min_element: core.adaptive.min_element_size, in metres whatever the units).
         got = getattr(settings.BakeSettings(**{name: options[name]}), name)
         if isinstance(want, str) or want is None:
             assert got == want, name

@@ -164,6 +164,37 @@ def test_vertex_budget_and_min_element_are_respected():
     assert coarse.output.vertices.shape[0] < fine.output.vertices.shape[0]
 
 
+def test_auto_min_element_follows_a_small_model():
+    # Radiance does not change when a whole scene is scaled, so neither should the mesh: the
+    # one-quad scene at a tenth of its size (diagonal 0.49 m) refines with min_element = its
+    # diagonal / 40 (auto), the same mesh as the full-size scene with ten times that, and the
+    # same colours. At full size (diagonal 4.9 m) auto is 0.05 m.
+    from core.adaptive import MIN_ELEMENT, min_element_size
+
+    big = one_quad_scene()
+    small = scene_from_polygons(big.vertices * 0.1, [[0, 1, 2, 3], [4, 5, 6, 7]], [0, 1],
+                                big.reflectance, big.emission)
+    assert min_element_size(big) == MIN_ELEMENT
+    auto = min_element_size(small)
+    assert auto == pytest.approx(small.bounding_diagonal() / 40) and auto < MIN_ELEMENT
+    a = bake(small, BakeSettings())
+    b = bake(big, BakeSettings(min_element=10 * auto, patch_size=10 * a._state.settings.patch_size))
+    assert a.output.vertices.shape[0] == b.output.vertices.shape[0]
+
+    def corners(m, scale):            # (position, red) of every corner, sorted
+        rows = np.concatenate([np.round(m.vertices[m.corner_verts] * scale, 9),
+                               m.corner_colours[:, :1]], axis=1)
+        return rows[np.lexsort(rows.T[::-1])]
+
+    ca, cb = corners(a.output, 10.0), corners(b.output, 1.0)
+    np.testing.assert_array_equal(ca[:, :3], cb[:, :3])
+    # Hemicube pixel ties at the two scales: 1e-6 of the brightest corner.
+    np.testing.assert_allclose(ca[:, 3], cb[:, 3], rtol=0, atol=1e-6 * cb[:, 3].max())
+    # Auto made the small model finer than 0.05 m would have.
+    fixed = bake(small, BakeSettings(min_element=MIN_ELEMENT))
+    assert a.output.vertices.shape[0] > fixed.output.vertices.shape[0]
+
+
 def test_closed_furnace_stays_coarse_and_exact():
     scene = furnace_box(rho=0.5, le=1.0, n=4)
     result = bake(scene, BakeSettings())

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from core import BakeSettings, scene_from_polygons
+from core.adaptive import MIN_ELEMENT
 from core.criteria import (STEEP_FLOOR, cavity_mask, interpolation_errors, per_leaf_scores,
                            smallest_split)
 from core.geometry import patch_extents
@@ -35,7 +36,7 @@ def scores(field, contrast=0.1):
     interp = interpolation_errors(tree, pts, y, floor=1e-9)[pts]
     C, E = pts.size, tree.n_leaves
     args = (tree, conf, y, np.zeros(C, np.int64), np.zeros(C, bool), np.zeros(E, bool), 1e-9,
-            BakeSettings(contrast=contrast))
+            BakeSettings(contrast=contrast, min_element=MIN_ELEMENT))
     floor = tree.leaf_face == 0
     floor_corner = np.repeat(floor[conf["face_leaf"]], conf["face_sizes"])
     with_rule, _ = per_leaf_scores(*args, corner_interp=interp)

@@ -16,8 +16,10 @@ Oracles, none of them the engine:
 import numpy as np
 import pytest
 
+from core.adaptive import min_element_size
 from core.bake import bake, relight
 from core.errors import SceneError
+from core.exact import point_polygon_form_factor
 from core.light_list import make_lights
 from core.lights import DirectLight, spot_factor
 from core.patches import make_patches
@@ -139,6 +141,32 @@ def test_umbra_is_black_and_the_open_floor_unshadowed():
     assert result.report["energy"]["emitted"] > 0
 
 
+#: The lamp through the hemicube ('off'): a 1 m lamp 2 m away is ~8 pixels wide on a 64-pixel
+#: hemicube; measured 1.8 % at most at the open floor's points: 4 %.
+HEMICUBE_LAMP_RTOL = 0.04
+
+
+def test_a_patch_whose_centre_lies_in_shadow_still_lights_its_corners():
+    # One patch for the whole floor (patch_size 4 m, no near splits): its centre lies in the
+    # plate's umbra, so the solve (the lamp through the hemicube) gives it nothing, and nothing
+    # else lights it (a black plate, no world). The mesh's points on it that see the lamp are
+    # gathered all the same (core.adaptive._sees_a_light); before, the whole floor read black.
+    plate = [[-0.5, -0.5, 1.0], [-0.5, 0.5, 1.0], [0.5, 0.5, 1.0], [0.5, -0.5, 1.0]]
+    lamp = [[-0.5, -0.5, 2.0], [-0.5, 0.5, 2.0], [0.5, 0.5, 2.0], [0.5, -0.5, 2.0]]
+    V = [[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]] + plate + lamp
+    scene = scene_from_polygons(np.array(V, float), [[0, 1, 2, 3], [4, 5, 6, 7], [8, 9, 10, 11]],
+                                [0, 1, 2], [[RHO] * 3, [0.0] * 3, [0.0] * 3],
+                                [[0, 0, 0], [0, 0, 0], [10.0] * 3])
+    result = bake(scene, BakeSettings(patch_size=4.0, emitter_levels=0, exact_direct="off"))
+    pts, colours, face = _output(result)
+    # Outside the penumbra (it ends 1.5 m from the centre).
+    open_ = (face == 0) & (np.maximum(np.abs(pts[:, 0]), np.abs(pts[:, 1])) > 1.6)
+    assert open_.sum() >= 4
+    ff = point_polygon_form_factor(pts[open_], np.tile([0.0, 0.0, 1.0], (open_.sum(), 1)),
+                                   np.array([lamp]))[:, 0]
+    np.testing.assert_allclose(colours[open_, 0], RHO * 10.0 * ff, rtol=HEMICUBE_LAMP_RTOL)
+
+
 def test_penumbra_of_a_straight_edge_under_a_disk_light():
     """A black half-plane (x < 0) at height 1 under a disk light of radius r at height 2: a floor
     point at x sees the part of the light beyond x (1 - H / h) = -x, a disk cut by a line."""
@@ -192,7 +220,7 @@ def test_scaled_scene_bakes_the_same():
     s = BakeSettings(output_mode="vertices")
     ra = bake(a, s)
     rb = bake(b, BakeSettings(output_mode="vertices", patch_size=s.patch_size or 0.5 * k,
-                              min_element=s.min_element * k))
+                              min_element=min_element_size(a) * k))
     # float32 hemicube rows of the small indirect part: 1e-5
     np.testing.assert_allclose(rb.corner_colours, ra.corner_colours, rtol=1e-5, atol=1e-9)
 
