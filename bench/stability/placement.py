@@ -8,7 +8,7 @@ units once at the boundary gives) and with the defaults in metres.
 
 import numpy as np
 
-from core.adaptive import coarse_patch_size
+from core.adaptive import coarse_patch_size, min_element_size
 from core.patches import make_patches
 from core.settings import TABLE, BakeSettings
 
@@ -32,10 +32,12 @@ def corner_error(result, ref, keep):
 
 
 def scaled_settings(ctx, scene0, scale, **kw):
-    """Every length setting (unit 'm') scaled; the auto patch size made explicit first."""
-    resolved = BakeSettings()                  # auto lengths as the bake resolves them
+    """Every length setting (unit 'm') scaled; the auto lengths made explicit first, as the
+    bake resolves them for ``scene0``."""
+    resolved = BakeSettings()
     lengths = {row.name: getattr(resolved, row.name) for row in TABLE if row.is_length}
     lengths["patch_size"] = coarse_patch_size(scene0)
+    lengths["min_element"] = min_element_size(scene0)
     return ctx.settings(**{k: v * scale for k, v in lengths.items()}, **kw)
 
 
