@@ -484,10 +484,9 @@ def _sees_a_light(points, normals, emitters, direct):
     would read black. Measured: the Cornell box's floor behind the short block, every other
     surface black, hemicube emitters: points 0.2-0.5 of the open floor's light read 0.
     """
-    out = np.zeros(points.shape[0], dtype=bool)
     if points.shape[0] == 0:
-        return out
-    out = (emitters.visibility(points, normals) != 0)
+        return np.zeros(0, dtype=bool)
+    out = emitters.visibility(points, normals) != 0
     if direct is not None:
         out |= np.any(direct.incident(points, normals) > 0, axis=1)
     return out

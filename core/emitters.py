@@ -210,8 +210,8 @@ class Emitters:
         # The rim's points per face (a few per lamp face: a list).
         self._rim = []
         for i, n in enumerate(scene.face_sizes[faces]):
-            corners = self._polys[i, np.unique(np.arange(min(n, RIM_CORNERS)) * n
-                                               // min(n, RIM_CORNERS))]
+            m = min(n, RIM_CORNERS)
+            corners = self._polys[i, np.arange(m) * n // m]
             self._rim.append(corners + RIM * (self._centre[i] - corners))
         # The faces' patches, as cumulative area per face (sampling by inverse CDF).
         mine = np.isin(patches.face, faces)
