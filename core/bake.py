@@ -23,6 +23,7 @@ import numpy as np
 from .adaptive import coarse_patch_size, mesh_colours, min_element_size
 from .colours import corner_colours
 from .contacts import find_contacts, split_at_contacts
+from .footlines import foot_lines
 from .criteria import cavity_mask, face_variation, near_emitter_mask, unlit_late_nodes
 from .emitters import Emitters, exact_materials
 from .lights import DirectLight
@@ -224,6 +225,12 @@ def _solve_patches(scene, settings, check, back_open=None):
     if settings.contact_cuts:
         found = find_contacts(scene, patches)
         patches, _, contacts = split_at_contacts(scene, patches, found)
+        if settings.shadow_cuts:
+            lines, count = foot_lines(scene, patches, found, settings.contrast,
+                                      settings.min_element)
+            patches, _, more = split_at_contacts(scene, patches, lines)
+            contacts = dict(contacts, shadow_lines=count, shadow_cuts=more["cuts"],
+                            shadow_added=more["added"])
     return patches, found, contacts
 
 

@@ -151,6 +151,21 @@ def _crossed(corners, k, size, a, u, w, length, tol, along=False):
     return (h_max > margin) & (h_min < -margin) & (t_max > tol) & (t_min < length - tol)
 
 
+def _clear_of_corners(corners, k, size, a, w, gap):
+    """(n,) bool: where the line (a, w) crosses an edge of the patch, the crossing point is at
+    least ``gap`` x ``size`` from both ends of that edge (the cut leaves no edge shorter than
+    that: a line that meets a patch's edge next to its corner would make a needle)."""
+    h = np.einsum("ikj,ij->ik", corners - a[:, None, :], w)
+    h = np.where(np.abs(h) <= SNAP * size[:, None], 0.0, h)
+    nxt = (np.arange(4)[None, :] + 1) % k[:, None]
+    hn = np.take_along_axis(h, nxt, axis=1)
+    edge = np.linalg.norm(np.take_along_axis(corners, nxt[:, :, None], axis=1) - corners, axis=2)
+    cross = (np.arange(4)[None, :] < k[:, None]) & (h * hn < 0)
+    t = np.where(cross, h / np.where(cross, h - hn, 1.0), 0.5)
+    near = np.minimum(t, 1.0 - t) * edge
+    return np.all(~cross | (near >= gap * size[:, None]), axis=1)
+
+
 def _box_pairs(lo_a, hi_a, lo_b, hi_b, cell):
     """Pairs (i, j) of boxes a_i, b_j (any dimension) that overlap, found through a uniform grid.
 
@@ -215,12 +230,23 @@ class Contacts:
         run along the patch's edge (a box whose outline follows patch edges: the office's
         shelving panel standing on a cavity split's edge). Both kinds are contact lines for the
         final gather and the refinement.
+    other : (K,) int64 or None
+        The face that meets the patch's plane along the segment (:mod:`core.footlines` finds
+        objects' corners from it).
+    normal : (K, 3) float64 or None
+        Unit normal of the patch's plane.
+    min_gap : float
+        0, or a line cuts no piece where it would cross an edge nearer its ends than this
+        fraction of the piece's size (:func:`_clear_of_corners`; shadow lines, which need not
+        be cut everywhere, unlike a contact).
     """
 
-    def __init__(self, patch, a, u, w, length, vertices, tol, cuts=None):
+    def __init__(self, patch, a, u, w, length, vertices, tol, cuts=None, other=None,
+                 normal=None, min_gap=0.0):
         self.patch, self.a, self.u, self.w, self.length = patch, a, u, w, length
         self.vertices, self.tol = vertices, tol
         self.cuts = np.ones(patch.size, dtype=bool) if cuts is None else cuts
+        self.other, self.normal, self.min_gap = other, normal, min_gap
 
 
 #: The grid of the spatial join has at most this many cells along the scene's diagonal.
@@ -282,8 +308,10 @@ def find_contacts(scene, patches, *, tol=None):
                                 * u[along], tol)
     keep = hit | along
     pi, a, u, w, length, hit = pi[keep], a[keep], u[keep], w[keep], length[keep], hit[keep]
-    o = np.lexsort((gi[keep], pi))
-    return Contacts(pi[o], a[o], u[o], w[o], length[o], on_line, tol, cuts=hit[o])
+    gi = gi[keep]
+    o = np.lexsort((gi, pi))
+    return Contacts(pi[o], a[o], u[o], w[o], length[o], on_line, tol, cuts=hit[o], other=gi[o],
+                    normal=n_f[pi[o]])
 
 
 def _on_outline(scene, f, m, tol):
@@ -495,6 +523,9 @@ def split_at_contacts(scene, patches, contacts=None, *, tol=None):
         rc = start[pair_p[r]] + rl
         size_c = np.sqrt(newell_normals_areas(new_corners[rc])[1])
         hit = _crossed(new_corners[rc], k_new[rc], size_c, a[r], u[r], w[r], length[r], tol)
+        if contacts.min_gap > 0:
+            hit &= _clear_of_corners(new_corners[rc], k_new[rc], size_c, a[r], w[r],
+                                     contacts.min_gap)
         pair_p, a, u, w, length = rc[hit], a[r[hit]], u[r[hit]], w[r[hit]], length[r[hit]]
         parent = parent[par]
         face = face[par]

@@ -243,6 +243,11 @@ TABLE = (
             "Cut patches along the lines where objects touch or pierce a surface (a box on a "
             "floor), so no light leaks under objects and their feet are not too dark",
             exposed=True, doc="core.contacts."),
+    Setting("shadow_cuts", "bool", True, "Cut at Shadows",
+            "With Cut at Contacts: also cut patches along the shadow lines that leave an "
+            "object's corners on the surface it stands on, towards each light, so a penumbra "
+            "narrower than any element is drawn along its edges",
+            exposed=True, doc="core.footlines."),
     Setting("rotate_hemicube", "bool", True, "Rotate Cubes",
             "Random rotation of each hemicube about its normal (breaks up aliasing; drawn from "
             "seed)"),

@@ -135,6 +135,9 @@ def draw_advanced(layout, props):
     layout.prop(props, "sky_illuminance")
     col = layout.column()
     col.prop(props, "contact_cuts")
+    sub = col.row()
+    sub.active = props.contact_cuts
+    sub.prop(props, "shadow_cuts")
     col.prop(props, "selected_only")
     col.prop(props, "make_single_user")
 

@@ -22,6 +22,7 @@ from core import BakeSettings, SettingsError, bake, relight, scene_from_polygons
 from core.exact import point_polygon_form_factor
 from core.raycast import any_hit, build_bvh
 from bench.scenes import furnace_box, room_with_boxes
+from builders import floor_field as interpolate
 
 LE, RHO = 10.0, 0.5
 
@@ -38,30 +39,6 @@ FURNACE_TOL = 0.01
 #: the open floor of the quadrature (hemicube point gather + linear interpolation).
 UMBRA_MAX = 0.05
 PENUMBRA_TOL = 0.05
-
-
-def interpolate(mesh, points):
-    """Linear interpolation of the OutputMesh corner colours at points on z = 0: (S, 3)."""
-    tris = []
-    for k in (1, 2):                                   # (0, k, k + 1) of every face
-        s = mesh.face_starts[mesh.face_sizes >= k + 2]
-        tris.append(np.stack([s, s + k, s + k + 1], axis=1))
-    tris = np.concatenate(tris)                        # (T, 3) output corners
-    xy = mesh.vertices[mesh.corner_verts[tris]][:, :, :2]
-    z = mesh.vertices[mesh.corner_verts[tris]][:, :, 2]
-    flat = np.all(np.abs(z) < 1e-9, axis=1)
-    tris, xy = tris[flat], xy[flat]
-    a, b, c = xy[:, 0], xy[:, 1], xy[:, 2]
-    det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])
-    out = np.full((points.shape[0], 3), np.nan)
-    for i, p in enumerate(points[:, :2]):
-        u = ((p[0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (p[1] - a[:, 1])) / det
-        v = ((b[:, 0] - a[:, 0]) * (p[1] - a[:, 1]) - (p[0] - a[:, 0]) * (b[:, 1] - a[:, 1])) / det
-        inside = np.flatnonzero((u >= -1e-12) & (v >= -1e-12) & (u + v <= 1 + 1e-12))
-        t = inside[0]
-        w = np.array([1 - u[t] - v[t], u[t], v[t]])
-        out[i] = w @ mesh.corner_colours[tris[t]]
-    return out
 
 
 def one_quad_scene():
