@@ -63,6 +63,10 @@ PAIR_CHUNK = 1 << 16
 #: length out of the object and up from the plane.
 OUTSIDE = 0.02
 
+#: The boundary test looks this fraction of the distance from the corner to either side of a
+#: line, halfway along it.
+PROBE = 0.05
+
 #: A lamp's corner is aimed at this fraction of the way to its face's centre.
 AIM_INSET = 0.05
 
@@ -344,6 +348,21 @@ def shadow_lines(scene, patches, contacts, min_share=MIN_SHARE, min_element=None
     ci, qi, u, length, ang = ci[keep], qi[keep], u[keep], length[keep], ang[keep]
     if ci.size == 0:
         return none
+    # A line is a shadow boundary only if, halfway along it, its light point is seen from one
+    # side and hidden from the other (two rays): this drops lines that the corner's geometry
+    # allows but the scene does not (a room's floor and wall meeting a partition's plane).
+    mid = c[ci] + 0.5 * length[:, None] * u
+    side = PROBE * 0.5 * length[:, None] * _unit(np.cross(n[ci], u))
+    lift = OUTSIDE * np.minimum(h[ci], length)[:, None] * n[ci]
+    seen = []
+    for sign in (1.0, -1.0):
+        x = mid + sign * side + lift
+        direction = np.where(at_inf[qi, None], far * q[qi], q[qi] - x)
+        seen.append(~any_hit(bvh, x, direction, t_max=1.0 - 1e-9))
+    keep = seen[0] != seen[1]
+    ci, u, length, ang = ci[keep], u[keep], length[keep], ang[keep]
+    if ci.size == 0:
+        return none
     # One line per corner and direction.
     order = np.lexsort((ang, ci))
     ci, u, length, ang = ci[order], u[order], length[order], ang[order]
@@ -456,7 +475,9 @@ def _candidates(c, n, e, d1, d2, h, q, at_inf, group, tol, min_element=None):
         sorted_ang = ang[order]
         spread = sorted_ang[last] - sorted_ang[first]           # per (corner, light)
         run = np.cumsum(first) - 1                              # of each sorted row
-        cap = RESOLVED * min_element / np.maximum(spread[run], np.finfo(float).tiny)
+        wide = spread[run] > 0
+        cap = np.full(run.size, np.inf)
+        cap[wide] = RESOLVED * min_element / spread[run][wide]
         length = length.copy()
         length[order] = np.minimum(length[order], cap)
     return ci[pick], qi[pick], u[pick], length[pick], ang[pick]

@@ -130,11 +130,13 @@ def test_element_levels_reach_the_bake(package, tmp_path):
 
 def test_contact_cuts_reach_the_bake(package, tmp_path):
     # The Cornell box's blocks stand on the floor: the default bake cuts the floor's patches
-    # along their outlines, --no-contact-cuts does not.
+    # along their outlines and along the shadow lines that leave their corners;
+    # --no-shadow-cuts keeps the outlines only, --no-contact-cuts cuts nothing.
     src = tmp_path / "cornell.blend"
     shutil.copyfile(CORNELL, src)
     reports = {}
-    for name, extra in (("on", []), ("off", ["--no-contact-cuts"])):
+    for name, extra in (("on", []), ("off", ["--no-contact-cuts"]),
+                        ("outlines", ["--no-shadow-cuts"])):
         proc = run_batch(src, "--output", tmp_path / ("%s.blend" % name), "--report",
                          tmp_path / ("%s.json" % name), *FAST, *extra)
         assert proc.returncode == 0, proc.stderr
@@ -142,7 +144,11 @@ def test_contact_cuts_reach_the_bake(package, tmp_path):
     assert reports["on"]["settings"]["contact_cuts"] is True
     assert reports["off"]["settings"]["contact_cuts"] is False
     assert reports["on"]["contacts"]["cut"] > 0
-    assert reports["on"]["patches"] == reports["off"]["patches"] + reports["on"]["contacts"]["added"]
+    on, outlines = reports["on"]["contacts"], reports["outlines"]["contacts"]
+    assert reports["outlines"]["settings"]["shadow_cuts"] is False
+    assert on["shadow_lines"] > 0 and on["shadow_added"] > 0 and "shadow_lines" not in outlines
+    assert reports["outlines"]["patches"] == reports["off"]["patches"] + outlines["added"]
+    assert reports["on"]["patches"] == reports["outlines"]["patches"] + on["shadow_added"]
     assert "contacts" not in reports["off"]
 
 

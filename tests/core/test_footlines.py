@@ -44,9 +44,10 @@ def footprint(centre=CENTRE, half=HALF, turn=TURN):
         @ np.array([[c, s], [-s, c]])
 
 
-def box_on_floor(lamp=LAMP, centre=CENTRE):
+def box_on_floor(lamp=LAMP, centre=CENTRE, lights=None, wall_x=None):
     """A 4 x 4 m floor as one quad, a black box (no bottom) standing on it, turned 30 degrees
-    to the floor's edges, and a square lamp as one quad."""
+    to the floor's edges, and a square lamp as one quad (or, with ``lights``, those lights and
+    a lamp too dim to count); ``wall_x``: a wall across the floor at that x, 3 m high."""
     xy = footprint(centre)
     lo, hi = np.c_[xy, np.zeros(4)], np.c_[xy, np.full(4, HEIGHT)]
     x0, x1, y0, y1, z = lamp
@@ -54,9 +55,15 @@ def box_on_floor(lamp=LAMP, centre=CENTRE):
                         [[x0, y0, z], [x0, y1, z], [x1, y1, z], [x1, y0, z]], lo, hi])
     polys = [[0, 1, 2, 3], [4, 5, 6, 7], [12, 13, 14, 15]]
     polys += [[8 + i, 8 + (i + 1) % 4, 12 + (i + 1) % 4, 12 + i] for i in range(4)]
-    return scene_from_polygons(v, polys, [0, 1] + [2] * 5, [[RHO] * 3, [0.0] * 3, [0.0] * 3],
-                               [[0.0] * 3, [LE] * 3, [0.0] * 3], face_objects=[0, 1] + [2] * 5,
-                               object_names=["floor", "lamp", "box"])
+    mats = [0, 1] + [2] * 5
+    if wall_x is not None:
+        v = np.concatenate([v, [[wall_x, 0, 0], [wall_x, 4, 0], [wall_x, 4, 3], [wall_x, 0, 3]]])
+        polys.append([16, 17, 18, 19])
+        mats.append(2)
+    le = LE if lights is None else 1e-9
+    return scene_from_polygons(v, polys, mats, [[RHO] * 3, [0.0] * 3, [0.0] * 3],
+                               [[0.0] * 3, [le] * 3, [0.0] * 3], face_objects=mats,
+                               object_names=["floor", "lamp", "box"], lights=lights)
 
 
 def lines_of(scene):
@@ -115,11 +122,53 @@ def test_lines_leave_the_corners_that_cast_a_shadow_away_from_the_lamp():
         assert got[match, 6][0] == pytest.approx(reach, abs=1e-8)
 
 
+@pytest.mark.parametrize("kind", ["point", "sun"])
+def test_a_point_light_or_the_sun_casts_one_line_per_silhouette_corner(kind):
+    # A light with no size: from each corner whose edge it sees as a silhouette (the footprint
+    # on one side of the line through the light and the corner, seen from above), one line
+    # away from the light, to the shadow of the edge's top.
+    light = np.array([3.2, 1.1, 2.5])
+    if kind == "point":
+        lights = [dict(kind="point", position=light.tolist(), power=100.0)]
+    else:
+        to_sun = light - [CENTRE[0], CENTRE[1], 0.0]
+        lights = [dict(kind="sun", direction=(-to_sun / np.linalg.norm(to_sun)).tolist(),
+                       strength=3.0)]
+    got, count, _, _ = lines_of(box_on_floor(lights=lights))
+    fp = footprint()
+    want = []
+    for k, c in enumerate(fp):
+        q = light[:2] if kind == "point" else c + (light[:2] - CENTRE)
+        others = np.delete(fp, k, axis=0) - c
+        d = q - c
+        side = d[0] * others[:, 1] - d[1] * others[:, 0]
+        if np.all(side >= 0) or np.all(side <= 0):
+            rise = light[2] if kind == "point" else light[2]
+            want.append((c, (c - q) / np.linalg.norm(c - q),
+                         np.linalg.norm(c - q) * HEIGHT / (rise - HEIGHT) if kind == "point"
+                         else np.linalg.norm(c - q) * HEIGHT / rise))
+    assert count == len(want) == got.shape[0] == 2
+    for c, u, reach in want:
+        match = np.all(np.abs(got[:, :2] - c) < 1e-9, axis=1) \
+            & np.all(np.abs(got[:, 3:5] - u) < 1e-9, axis=1)
+        assert match.sum() == 1, (c, u, got)
+        assert got[match, 6][0] == pytest.approx(min(reach, REACH * HEIGHT), abs=1e-8)
+
+
 def test_a_corner_under_a_wide_lamp_casts_no_line():
     # The lamp covers the whole box: each corner's edge is a silhouette for parts of the lamp on
     # both sides of it, whose lines fan out all round; none bounds a penumbra.
     lamp = (1.0, 2.2, 1.4, 2.6, 2.0)
     got, count, _, _ = lines_of(box_on_floor(lamp=lamp))
+    assert count == 0 and got.shape[0] == 0
+
+
+def test_a_lamp_behind_a_wall_casts_no_line():
+    # The same box and lamp with a wall between them (the lamp in the next room): the corners'
+    # geometry allows the lines, but no corner sees the lamp.
+    got, count, _, _ = lines_of(box_on_floor())
+    assert count > 0
+    got, count, _, _ = lines_of(box_on_floor(wall_x=2.2))
     assert count == 0 and got.shape[0] == 0
 
 
