@@ -16,8 +16,14 @@ Lischinski, Tampieri & Greenberg 1992). Per light the two extreme lines over its
 corners of an emissive face, a point or spot light's centre moved by its radius across the
 plane, a sun's direction turned by its half angle) bound the penumbra; both cut the patches they
 cross (:func:`core.contacts.split_at_contacts`), from the corner to the shadow of the edge's top
-(at most ``REACH`` times the edge's length). Occlusion by other objects is not tested: a line
-that is no boundary only costs the pieces it makes.
+(at most ``REACH`` times the edge's length, and no farther than where the penumbra between the
+two is ``RESOLVED`` minimum elements wide: from there the mesh's refinement draws it).
+
+Each line is checked against the scene before it cuts: its light must give at least
+``min_share`` (the bake's ``contrast``) of the corner's direct light, counting only the share
+of its points that a ray from just outside the corner sees (a lamp in the next room gives
+none), and halfway along the line the light's point must be seen from one side and hidden from
+the other. A line that passes both and still is no boundary only costs the pieces it makes.
 """
 
 import numpy as np
@@ -325,8 +331,8 @@ def shadow_lines(scene, patches, contacts, min_share=MIN_SHARE, min_element=None
         return none
     # Which lights matter at the corner: each light's direct light there (unshadowed, times
     # the share of its points seen from just outside the corner: a lamp in the next room,
-    # behind a wall, is out), against all of them. A light giving less than ``min_share`` of it draws a
-    # shadow edge of less contrast than the mesh refines for: no line.
+    # behind a wall, is out), against all of them. A light giving less than ``min_share`` of
+    # it draws a shadow edge of less contrast than the mesh refines for: no line.
     G = _emissive_faces(scene)[2] + (0 if scene.lights is None else len(scene.lights))
     r1 = _outward(n, d1, d2)
     x = c + OUTSIDE * h[:, None] * (r1 + n)
@@ -356,9 +362,9 @@ def shadow_lines(scene, patches, contacts, min_share=MIN_SHARE, min_element=None
     lift = OUTSIDE * np.minimum(h[ci], length)[:, None] * n[ci]
     seen = []
     for sign in (1.0, -1.0):
-        x = mid + sign * side + lift
-        direction = np.where(at_inf[qi, None], far * q[qi], q[qi] - x)
-        seen.append(~any_hit(bvh, x, direction, t_max=1.0 - 1e-9))
+        probe = mid + sign * side + lift
+        direction = np.where(at_inf[qi, None], far * q[qi], q[qi] - probe)
+        seen.append(~any_hit(bvh, probe, direction, t_max=1.0 - 1e-9))
     keep = seen[0] != seen[1]
     ci, u, length, ang = ci[keep], u[keep], length[keep], ang[keep]
     if ci.size == 0:

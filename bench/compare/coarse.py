@@ -378,8 +378,8 @@ def adaptive_runs(args):
     runs += [("adaptive min_element %g" % m, dict(min_element=m)) for m in args.min_elements]
     runs += [("adaptive emitters %s" % e, dict(exact_direct=e)) for e in args.exact_direct]
     runs += [("adaptive method %s" % m, dict(method=m)) for m in args.methods]
-    if args.without_shadow_cuts:
-        runs.append(("adaptive without shadow cuts", dict(shadow_cuts=False)))
+    if args.shadow_cuts:
+        runs.append(("adaptive with shadow cuts", dict(shadow_cuts=True)))
     return runs
 
 
@@ -549,8 +549,8 @@ def main(argv=None):
                     help="also run these exact_direct modes (the default 'auto' always runs)")
     ap.add_argument("--methods", nargs="*", default=[],
                     help="also run these form-factor methods (core.settings.METHODS)")
-    ap.add_argument("--without-shadow-cuts", action="store_true",
-                    help="also bake with shadow_cuts=False (core.footlines off)")
+    ap.add_argument("--shadow-cuts", action="store_true",
+                    help="also bake with shadow_cuts=True (core.footlines)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--cache", default=str(ROOT / "bench" / "results" / "cache"))
     ap.add_argument("--out", default=str(ROOT / "bench" / "results"))

@@ -130,13 +130,13 @@ def test_element_levels_reach_the_bake(package, tmp_path):
 
 def test_contact_cuts_reach_the_bake(package, tmp_path):
     # The Cornell box's blocks stand on the floor: the default bake cuts the floor's patches
-    # along their outlines and along the shadow lines that leave their corners;
-    # --no-shadow-cuts keeps the outlines only, --no-contact-cuts cuts nothing.
+    # along their outlines, --shadow-cuts along the shadow lines that leave their corners too,
+    # --no-contact-cuts cuts nothing.
     src = tmp_path / "cornell.blend"
     shutil.copyfile(CORNELL, src)
     reports = {}
-    for name, extra in (("on", []), ("off", ["--no-contact-cuts"]),
-                        ("outlines", ["--no-shadow-cuts"])):
+    for name, extra in (("outlines", []), ("off", ["--no-contact-cuts"]),
+                        ("on", ["--shadow-cuts"])):
         proc = run_batch(src, "--output", tmp_path / ("%s.blend" % name), "--report",
                          tmp_path / ("%s.json" % name), *FAST, *extra)
         assert proc.returncode == 0, proc.stderr
@@ -146,6 +146,7 @@ def test_contact_cuts_reach_the_bake(package, tmp_path):
     assert reports["on"]["contacts"]["cut"] > 0
     on, outlines = reports["on"]["contacts"], reports["outlines"]["contacts"]
     assert reports["outlines"]["settings"]["shadow_cuts"] is False
+    assert reports["on"]["settings"]["shadow_cuts"] is True
     assert on["shadow_lines"] > 0 and on["shadow_added"] > 0 and "shadow_lines" not in outlines
     assert reports["outlines"]["patches"] == reports["off"]["patches"] + outlines["added"]
     assert reports["on"]["patches"] == reports["outlines"]["patches"] + on["shadow_added"]

@@ -290,6 +290,6 @@ def test_regression_furnace_needles_at_a_wall_foot():
     scene = scene_from_polygons(v, polys, mats, np.full((3, 3), 0.5), np.ones((3, 3)))
     result = bake(scene, BakeSettings(output_mode="mesh", patch_size=2.015625, resolution=16,
                                       element_levels=0, min_element=0.50390625,
-                                      exact_direct="off", vertex_budget=300))
+                                      exact_direct="off", vertex_budget=300, shadow_cuts=True))
     assert result.report["contacts"]["shadow_lines"] > 0
     np.testing.assert_allclose(result.output.corner_colours, 2.0, rtol=1e-3)
