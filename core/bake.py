@@ -23,9 +23,9 @@ import numpy as np
 from .adaptive import coarse_patch_size, mesh_colours, min_element_size
 from .colours import corner_colours
 from .contacts import find_contacts, split_at_contacts
-from .footlines import foot_lines
 from .criteria import cavity_mask, face_variation, near_emitter_mask, unlit_late_nodes
 from .emitters import Emitters, exact_materials
+from .footlines import foot_lines
 from .lights import DirectLight
 from .light_list import Lights, make_lights
 from .duplicates import (duplicate_warning, fill_duplicate_colours, merge_duplicates,

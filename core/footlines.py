@@ -80,7 +80,7 @@ AIM_INSET = 0.05
 MAX_LINES = 4096
 
 
-def light_points(scene):
+def light_points(scene, lamps=None):
     """Points of the scene's lights.
 
     Returns
@@ -99,10 +99,11 @@ def light_points(scene):
 
     Every corner of every emissive face; each point or spot light's centre moved by its radius
     along the 3 axes both ways (the extreme lines come from the two that turn the plane most);
-    each sun's direction turned by its half angle the same way.
+    each sun's direction turned by its half angle the same way. ``lamps``: the scene's
+    :func:`_emissive_faces`, when they are at hand.
     """
     pos, inf, group, aim = [], [], [], []
-    faces, lamp, g0 = _emissive_faces(scene)
+    faces, lamp, g0 = _emissive_faces(scene) if lamps is None else lamps
     if faces.size:
         corners, owner = _corners_of(scene, faces)
         x = scene.vertices[corners]
@@ -157,12 +158,12 @@ def _emissive_faces(scene):
     return faces, lamp, int(lamp.max()) + 1
 
 
-def _irradiance(scene, x, n, G):
+def _irradiance(scene, lamps, x, n, G):
     """(k, G): each light's direct luminance irradiance at points ``x`` facing ``n`` before
     shadows (pi F Le for a lamp, its faces summed; I cos / d^2 in a spot's cone; E cos for a
-    sun), in the groups of :func:`light_points`."""
+    sun), in the groups of :func:`light_points`; ``lamps``: :func:`_emissive_faces`."""
     out = np.zeros((x.shape[0], G))
-    faces, lamp, g0 = _emissive_faces(scene)
+    faces, lamp, g0 = lamps
     if faces.size:
         le = np.asarray(scene.emission, dtype=np.float64)
         back = np.asarray(scene.back_materials()[1], dtype=np.float64)
@@ -317,7 +318,8 @@ def shadow_lines(scene, patches, contacts, min_share=MIN_SHARE, min_element=None
     none = np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3))
     tol = contacts.tol
     c, n, e, d1, d2, h = contact_corners(scene, patches, contacts)
-    q, at_inf, group, aim = light_points(scene)
+    lamps = _emissive_faces(scene)
+    q, at_inf, group, aim = light_points(scene, lamps)
     if c.shape[0] == 0 or q.shape[0] == 0:
         return none
     step = max(1, PAIR_CHUNK // q.shape[0])
@@ -333,10 +335,10 @@ def shadow_lines(scene, patches, contacts, min_share=MIN_SHARE, min_element=None
     # the share of its points seen from just outside the corner: a lamp in the next room,
     # behind a wall, is out), against all of them. A light giving less than ``min_share`` of
     # it draws a shadow edge of less contrast than the mesh refines for: no line.
-    G = _emissive_faces(scene)[2] + (0 if scene.lights is None else len(scene.lights))
+    G = lamps[2] + (0 if scene.lights is None else len(scene.lights))
     r1 = _outward(n, d1, d2)
     x = c + OUTSIDE * h[:, None] * (r1 + n)
-    light = _irradiance(scene, x, n, G)                                       # (C, G)
+    light = _irradiance(scene, lamps, x, n, G)                                # (C, G)
     # The share of each light's points the corner sees, one ray each; only for the lights that
     # could matter: unshadowed, at least min_share of the brightest one there (a long ray to a
     # lamp rooms away costs like hundreds of short ones).

@@ -246,7 +246,8 @@ TABLE = (
     Setting("shadow_cuts", "bool", False, "Cut at Shadows",
             "With Cut at Contacts: also cut patches along the shadow lines that leave an "
             "object's corners on the surface it stands on, towards each light, so a penumbra "
-            "narrower than any element is drawn along its edges (off by default: see the doc)",
+            "narrower than any element is drawn along its edges (off by default: far from "
+            "the origin it can leave slivers in the output mesh)",
             exposed=True,
             doc="core.footlines. Cornell box (coarse) 2.86 % -> 2.50 % against Cycles, 1.02x "
                 "the time; office and apartment 3.48 % -> 3.47 % with 2-3 % more vertices. Off "
