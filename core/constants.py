@@ -100,6 +100,11 @@ class Tolerances:
     barycentric: float = 1e-12
     #: Corner positions are matched after rounding to this fraction of the scene's size.
     point: float = 1e-9
+    #: Blender hands over float32 coordinates: a vertex modelled on an edge or a line is off it by
+    #: up to a few float32 roundings of the coordinates' magnitude (4 x 2**-23 of it; 1.4 cm at
+    #: 30 km from the origin). Points nearer each other than that are one point to the
+    #: conformity pass (:mod:`core.hierarchy`), so no cut may make a feature that small.
+    float32: float = 4.0 * 2.0 ** -23
 
 
 #: The tolerances (trimesh's ``tol``): ``from .constants import tol``.

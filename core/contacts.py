@@ -36,8 +36,18 @@ from .patches import Patches, assemble_patches, material_table, triangle_mask
 MIN_PIECE = 0.02
 
 #: Corners nearer a cut line than this fraction of the patch size count as on the line:
-#: a crossing point computed beside such a corner could round onto it.
+#: a crossing point computed beside such a corner could round onto it. So do corners within
+#: float32 rounding of their coordinates (``tol.float32``): the conformity pass takes points
+#: that near an edge as lying on it, so a crossing point beside such a corner would be welded
+#: into the neighbouring patches' edges as a needle (an office 30 km from the origin, a room at
+#: 733 m read 74 % low at such corners).
 SNAP = 1e-9
+
+
+def _snapped(h, corners, size):
+    """Signed distances h (n, 4) of the corners from the line, 0 where they count as on it."""
+    near = np.maximum(SNAP * size, constants.tol.float32 * np.abs(corners).max(axis=(1, 2)))
+    return np.where(np.abs(h) <= near[:, None], 0.0, h)
 
 #: Most cuts applied to one original patch (a patch under a chair leg meets 4 lines).
 MAX_CUTS = 8
@@ -136,7 +146,12 @@ def _lines_of(a, b, plane_n):
 
 def _crossed(corners, k, size, a, u, w, length, tol, along=False):
     """(n,) bool: the segment (a, u, length) crosses the patch (corners, k corners) strictly;
-    ``along``: it touches the patch instead (runs inside it or along its edge, within tol)."""
+    ``along``: it touches the patch instead (runs inside it or along its edge, within tol).
+
+    Crossing means corners lie on both sides of the line beyond ``MIN_PIECE x size`` and the
+    line's chord through the patch overlaps the segment by more than tol: a segment that ends on
+    the patch's edge does not cross the patch its line goes on into (a shadow line leaving an
+    object's corner that lies inside a patch's edge)."""
     rel = corners - a[:, None, :]
     h = np.einsum("ikj,ij->ik", rel, w)
     t = np.einsum("ikj,ij->ik", rel, u)
@@ -144,26 +159,36 @@ def _crossed(corners, k, size, a, u, w, length, tol, along=False):
     margin = MIN_PIECE * size
     h_max = np.where(slot_ok, h, -np.inf).max(axis=1)
     h_min = np.where(slot_ok, h, np.inf).min(axis=1)
-    t_max = np.where(slot_ok, t, -np.inf).max(axis=1)
-    t_min = np.where(slot_ok, t, np.inf).min(axis=1)
     if along:
+        t_max = np.where(slot_ok, t, -np.inf).max(axis=1)
+        t_min = np.where(slot_ok, t, np.inf).min(axis=1)
         return (h_max >= -tol) & (h_min <= tol) & (t_max > tol) & (t_min < length - tol)
-    return (h_max > margin) & (h_min < -margin) & (t_max > tol) & (t_min < length - tol)
+    nxt = (np.arange(4)[None, :] + 1) % k[:, None]
+    hn = np.take_along_axis(h, nxt, axis=1)
+    tn = np.take_along_axis(t, nxt, axis=1)
+    cross = slot_ok & (h * hn < 0)
+    on = slot_ok & (h == 0)
+    tc = t + (tn - t) * np.where(cross, h / np.where(cross, h - hn, 1.0), 0.0)
+    t_out = np.maximum(np.where(cross, tc, -np.inf).max(axis=1),
+                       np.where(on, t, -np.inf).max(axis=1))
+    t_in = np.minimum(np.where(cross, tc, np.inf).min(axis=1), np.where(on, t, np.inf).min(axis=1))
+    return (h_max > margin) & (h_min < -margin) & (t_out > tol) & (t_in < length - tol)
 
 
 def _clear_of_corners(corners, k, size, a, w, gap):
     """(n,) bool: where the line (a, w) crosses an edge of the patch, the crossing point is at
     least ``gap`` x ``size`` from both ends of that edge (the cut leaves no edge shorter than
-    that: a line that meets a patch's edge next to its corner would make a needle)."""
-    h = np.einsum("ikj,ij->ik", corners - a[:, None, :], w)
-    h = np.where(np.abs(h) <= SNAP * size[:, None], 0.0, h)
+    that, nor nearer than float32 rounding of the coordinates: a line that meets a patch's
+    edge next to its corner would make a needle)."""
+    h = _snapped(np.einsum("ikj,ij->ik", corners - a[:, None, :], w), corners, size)
+    need = np.maximum(gap * size, constants.tol.float32 * np.abs(corners).max(axis=(1, 2)))
     nxt = (np.arange(4)[None, :] + 1) % k[:, None]
     hn = np.take_along_axis(h, nxt, axis=1)
     edge = np.linalg.norm(np.take_along_axis(corners, nxt[:, :, None], axis=1) - corners, axis=2)
     cross = (np.arange(4)[None, :] < k[:, None]) & (h * hn < 0)
     t = np.where(cross, h / np.where(cross, h - hn, 1.0), 0.5)
     near = np.minimum(t, 1.0 - t) * edge
-    return np.all(~cross | (near >= gap * size[:, None]), axis=1)
+    return np.all(~cross | (near >= need[:, None]), axis=1)
 
 
 def _box_pairs(lo_a, hi_a, lo_b, hi_b, cell):
@@ -384,15 +409,15 @@ def _cut(corners, k, a, w, size):
     becomes a quad and a triangle. Crossing points are computed from the edge's endpoints in a
     canonical order, so the two patches sharing an edge place bit-identical points on it.
 
-    Corners within ``SNAP x size`` of the line count as on it (no crossing point is made next to
-    them, which rounding could put on the corner itself), and a patch the line does not cross
+    Corners within ``SNAP x size`` of the line or float32 rounding (:func:`_snapped`) count as
+    on it (no crossing point is made next to them, which rounding could put on the corner
+    itself), and a patch the line does not cross
     by more than ``MIN_PIECE x size`` on both sides is returned whole: no piece can be
     degenerate (every piece has a corner at least ``MIN_PIECE x size`` from the line and two
     distinct points on it).
     """
     n = corners.shape[0]
-    h = np.einsum("ikj,ij->ik", corners - a[:, None, :], w)
-    h = np.where(np.abs(h) <= SNAP * size[:, None], 0.0, h)
+    h = _snapped(np.einsum("ikj,ij->ik", corners - a[:, None, :], w), corners, size)
     slot_ok = np.arange(4)[None, :] < k[:, None]
     margin = MIN_PIECE * size
     crossed = ((np.where(slot_ok, h, -np.inf).max(axis=1) > margin)
@@ -532,5 +557,6 @@ def split_at_contacts(scene, patches, contacts=None, *, tol=None):
         corners = new_corners
     info["added"] = int(corners.shape[0] - P0)
     n_faces = patches.face_patch_start.shape[0] - 1
-    new = assemble_patches(corners, face, material_table(patches), n_faces, inc_v, inc_p, inc_c, inc_s)
+    new = assemble_patches(corners, face, material_table(patches), n_faces, inc_v, inc_p, inc_c,
+                           inc_s)
     return new, parent, info

@@ -30,6 +30,7 @@ import numpy as np
 
 from .contacts import Contacts, _box_pairs, _clear_of_corners, _crossed, _unit
 from .exact import point_polygon_form_factor, ray_triangles
+from .geometry import ragged
 from .lights import LUMA, spot_factor
 from .patches import connected_labels, triangle_mask
 from .raycast import any_hit, build_bvh
@@ -107,9 +108,7 @@ def light_points(scene, lamps=None):
     if faces.size:
         corners, owner = _corners_of(scene, faces)
         x = scene.vertices[corners]
-        centroid = np.zeros((faces.size, 3))
-        np.add.at(centroid, owner, x)
-        centroid /= scene.face_sizes[faces][:, None]
+        centroid = _centroids(scene, faces, x, owner)
         pos.append(x)
         inf.append(np.zeros(corners.size, dtype=bool))
         group.append(lamp[owner])
@@ -193,10 +192,15 @@ def _irradiance(scene, lamps, x, n, G):
 
 def _corners_of(scene, faces):
     """Scene vertex of every corner of ``faces`` and the index (into ``faces``) of its face."""
-    sizes = scene.face_sizes[faces]
-    owner = np.repeat(np.arange(faces.size), sizes)
-    local = np.arange(owner.size) - np.repeat(np.cumsum(sizes) - sizes, sizes)
+    owner, local, _ = ragged(scene.face_sizes[faces])
     return scene.corner_verts[scene.face_starts[faces][owner] + local], owner
+
+
+def _centroids(scene, faces, x, owner):
+    """Mean corner of each of ``faces``, from its corners' points ``x`` (of :func:`_corners_of`)."""
+    centroid = np.zeros((faces.size, 3))
+    np.add.at(centroid, owner, x)
+    return centroid / scene.face_sizes[faces][:, None]
 
 
 def contact_corners(scene, patches, contacts):
@@ -216,8 +220,8 @@ def contact_corners(scene, patches, contacts):
         Length of the rising edge (to the lower of the two faces' tops).
     """
     empty = (np.zeros((0, 3)),) * 5 + (np.zeros(0),)
-    other = getattr(contacts, "other", None)
-    if contacts is None or other is None or contacts.patch.size == 0:
+    other = None if contacts is None else contacts.other
+    if other is None or contacts.patch.size == 0:
         return empty
     tol = contacts.tol
     n = contacts.normal
@@ -251,7 +255,8 @@ def contact_corners(scene, patches, contacts):
     c = 0.5 * (ends[i] + ends[j])
     nn = n[rows[i]].copy()
     # The plane's side the object stands on (a floor wound the other way has its normal down).
-    nn *= np.where(_mean_height(scene, f1, c, nn) < 0, -1.0, 1.0)[:, None]
+    mid1 = _centroids(scene, f1, *_points_of(scene, f1))
+    nn *= np.where(np.einsum("ij,ij->i", mid1 - c, nn) < 0, -1.0, 1.0)[:, None]
     e = np.cross(scene.face_normals[f1], scene.face_normals[f2])
     norm = np.linalg.norm(e, axis=1)
     e = e / np.where(norm > 0, norm, 1.0)[:, None]
@@ -264,26 +269,21 @@ def contact_corners(scene, patches, contacts):
     return c[ok], nn[ok], e[ok], d1[ok], d2[ok], h[ok]
 
 
-def _mean_height(scene, faces, c, n):
-    """Per row: the mean height of face ``faces``' corners over the plane (c, n)."""
+def _points_of(scene, faces):
+    """The points of ``faces``' corners and the index (into ``faces``) of each one's face."""
     corners, owner = _corners_of(scene, faces)
-    up = np.einsum("ij,ij->i", scene.vertices[corners] - c[owner], n[owner])
-    return np.bincount(owner, weights=up, minlength=faces.size) / scene.face_sizes[faces]
+    return scene.vertices[corners], owner
 
 
 def _reach(scene, faces, c, e, n):
     """Per row: the length along ``e`` from ``c`` to the top of face ``faces`` (its highest
     corner over the plane of normal ``n`` through ``c``), and the unit direction into the face
     from the edge (its centroid's offset, perpendicular to ``e``)."""
-    corners, owner = _corners_of(scene, faces)
-    x = scene.vertices[corners]
+    x, owner = _points_of(scene, faces)
     up = np.einsum("ij,ij->i", x - c[owner], n[owner])
     top = np.full(faces.size, -np.inf)
     np.maximum.at(top, owner, up)
-    centroid = np.zeros((faces.size, 3))
-    np.add.at(centroid, owner, x)
-    centroid /= scene.face_sizes[faces][:, None]
-    d = centroid - c
+    d = _centroids(scene, faces, x, owner) - c
     d -= np.einsum("ij,ij->i", d, e)[:, None] * e
     rise = np.einsum("ij,ij->i", e, n)
     return top / np.where(rise > MIN_RISE, rise, 1.0), _unit(d)
@@ -322,9 +322,10 @@ def shadow_lines(scene, patches, contacts, min_share=MIN_SHARE, min_element=None
     q, at_inf, group, aim = light_points(scene, lamps)
     if c.shape[0] == 0 or q.shape[0] == 0:
         return none
+    r1 = _outward(n, d1, d2)
     step = max(1, PAIR_CHUNK // q.shape[0])
     found = [_candidates(c[s:s + step], n[s:s + step], e[s:s + step], d1[s:s + step],
-                         d2[s:s + step], h[s:s + step], q, at_inf, group, tol,
+                         d2[s:s + step], h[s:s + step], r1[s:s + step], q, at_inf, group, tol,
                          min_element)
              for s in range(0, c.shape[0], step)]
     ci = np.concatenate([f[0] + s for f, s in zip(found, range(0, c.shape[0], step))])
@@ -336,7 +337,6 @@ def shadow_lines(scene, patches, contacts, min_share=MIN_SHARE, min_element=None
     # behind a wall, is out), against all of them. A light giving less than ``min_share`` of
     # it draws a shadow edge of less contrast than the mesh refines for: no line.
     G = lamps[2] + (0 if scene.lights is None else len(scene.lights))
-    r1 = _outward(n, d1, d2)
     x = c + OUTSIDE * h[:, None] * (r1 + n)
     light = _irradiance(scene, lamps, x, n, G)                                # (C, G)
     # The share of each light's points the corner sees, one ray each; only for the lights that
@@ -424,9 +424,10 @@ def _outward(n, d1, d2):
     return _unit(r1 - np.einsum("ij,ij->i", r1, n)[:, None] * n)
 
 
-def _candidates(c, n, e, d1, d2, h, q, at_inf, group, tol, min_element=None):
+def _candidates(c, n, e, d1, d2, h, r1, q, at_inf, group, tol, min_element=None):
     """For corners (C,) and light points (Q,): per (corner, light) the two extreme shadow lines
-    as (corner, point, unit direction, length, angle about the corner), each (k,)."""
+    as (corner, point, unit direction, length, angle about the corner), each (k,); ``r1`` is
+    each corner's :func:`_outward` direction."""
     # Every (corner, light point) pair: the plane through the edge and the point.
     to_l = np.where(at_inf[None, :, None], q[None], q[None] - c[:, None])     # (C, Q, 3)
     height = np.einsum("cqj,cj->cq", to_l, n)
@@ -467,7 +468,6 @@ def _candidates(c, n, e, d1, d2, h, q, at_inf, group, tol, min_element=None):
         return ci, qi, np.zeros((0, 3)), np.zeros(0), np.zeros(0)
     u = t[ci, qi] / span[ci, qi, None]
     length = np.minimum(span[ci, qi], REACH * h[ci])
-    r1 = _outward(n, d1, d2)
     r2 = np.cross(n, r1)
     ang = np.arctan2(np.einsum("kj,kj->k", u, r2[ci]), np.einsum("kj,kj->k", u, r1[ci]))
     # Per (corner, light): the two extreme lines, by angle about the corner.
@@ -486,6 +486,5 @@ def _candidates(c, n, e, d1, d2, h, q, at_inf, group, tol, min_element=None):
         wide = spread[run] > 0
         cap = np.full(run.size, np.inf)
         cap[wide] = RESOLVED * min_element / spread[run][wide]
-        length = length.copy()
         length[order] = np.minimum(length[order], cap)
     return ci[pick], qi[pick], u[pick], length[pick], ang[pick]

@@ -44,6 +44,7 @@ neighbours then carry a hanging midpoint each and are triangulated in the output
 
 import numpy as np
 
+from . import constants
 from .conforming import (clip_convex_rings, output_mesh,  # noqa: F401 (API)
                          triangulate_hanging)
 from .geometry import newell_normals_areas, pairs_by_key, ragged
@@ -55,13 +56,22 @@ from .patches import (QUAD_CHILDREN, TRI_CHILDREN, Patches, assemble_patches, co
 WELD_REL = 1e-8
 
 #: A point lies inside an element edge (a T-junction) when its distance from the edge's line is
-#: at most this times the edge length (or FLOAT32_SLACK times the coordinates' magnitude) and
+#: at most this times the edge length (or FLOAT32_SLACK times the coordinates' magnitude within
+#: ON_EDGE_SLANT) and
 #: it is at least this far (relative) from both ends.
 ON_EDGE_REL = 1e-6
 
 #: Blender hands over float32 coordinates: a vertex modelled on an edge is off its line by up to
-#: a few float32 roundings of the coordinates.
-FLOAT32_SLACK = 4.0 * float(np.finfo(np.float32).eps)
+#: a few float32 roundings of the coordinates (``tol.float32``).
+FLOAT32_SLACK = constants.tol.float32
+
+#: ... but only within this slant (3 degrees) of the edge as seen from its nearer end: far from
+#: the origin the rounding (1.4 cm at 30 km) exceeds the small pieces that cuts leave at
+#: objects' corners, whose points would otherwise be taken as lying on their neighbours' edges
+#: (a point 1.2 cm from an edge's end in another direction) and give zero-area triangles
+#: (docs/stability.md, class 10 with shadow_cuts). A user's vertex rounded 2 mm off an edge
+#: is still found at 4 cm or more from the edge's ends.
+ON_EDGE_SLANT = 0.05
 
 #: Edge keys are lo * KEY_BASE + hi (point ids below 2**31).
 KEY_BASE = np.int64(1) << np.int64(31)
@@ -343,8 +353,8 @@ class ElementTree:
 def _weld(xyz, obj, size):
     """Merge points of one object closer than WELD_REL x their local size.
 
-    Returns unique points (V, 3), their objects (V,) and the point id of every input point. Exact duplicates first;
-    near ones by hashing on 8 half-shifted grids of twice the largest tolerance (two points
+    Returns unique points (V, 3), their objects (V,) and the point id of every input point.
+    Exact duplicates first; near ones by hashing on 8 half-shifted grids of twice the largest tolerance (two points
     within half a cell share a cell in one of them), joined by connected components.
     """
     rows = np.column_stack([obj.astype(np.float64), xyz])
@@ -396,7 +406,8 @@ def _points_on_edges(points, point_obj, a, b, edge_obj):
     A, B = points[a], points[b]
     d = B - A
     L = np.linalg.norm(d, axis=1)
-    tol = np.maximum(ON_EDGE_REL * L, FLOAT32_SLACK * np.maximum(np.abs(A).max(1), np.abs(B).max(1)))
+    slack = FLOAT32_SLACK * np.maximum(np.abs(A).max(1), np.abs(B).max(1))
+    tol = np.maximum(ON_EDGE_REL * L, np.minimum(slack, 0.5 * ON_EDGE_SLANT * L))
     lo = np.minimum(A, B) - tol[:, None]
     hi = np.maximum(A, B) + tol[:, None]
     base = points.min(axis=0)
@@ -426,7 +437,9 @@ def _points_on_edges(points, point_obj, a, b, edge_obj):
     L2 = np.maximum(L[edge] ** 2, np.finfo(float).tiny)
     t = np.einsum("ij,ij->i", Q, D) / L2
     off = np.linalg.norm(np.cross(D, Q), axis=1) / np.sqrt(L2)
-    ok = ((t > ON_EDGE_REL) & (t < 1 - ON_EDGE_REL) & (off <= tol[edge])
+    lens = np.minimum(slack[edge], ON_EDGE_SLANT * np.minimum(t, 1.0 - t) * L[edge])
+    ok = ((t > ON_EDGE_REL) & (t < 1 - ON_EDGE_REL)
+          & (off <= np.maximum(ON_EDGE_REL * L[edge], lens))
           & (q != a[edge]) & (q != b[edge]))
     return edge[ok], q[ok], t[ok]
 

@@ -12,7 +12,7 @@ from bench.scenes import _Builder
 from core import BakeSettings, bake
 from core.bake import make_reciprocal
 from core.constants import tol
-from core.contacts import find_contacts, split_at_contacts
+from core.contacts import _crossed, find_contacts, split_at_contacts
 from core.errors import SettingsError
 from core.patches import make_patches
 from core.scene import make_scene
@@ -249,3 +249,23 @@ def test_sinkhorn_leaves_groups_it_cannot_balance():
     G = areas[:3, None] * R[:3, :3]
     np.testing.assert_allclose(G, G.T, rtol=1e-4, atol=1e-7)
     np.testing.assert_array_equal(R[3:], F[3:])
+
+
+def test_a_segment_crosses_only_the_patches_it_runs_into():
+    """A line leaving a point inside a patch's edge crosses the patch it runs into, not the
+    one behind it that its line would cut too (a shadow line leaving an object's corner cut
+    the neighbouring patch the wrong way: core.footlines). The corners' t-range cannot tell:
+    the patch behind reaches t = 0.17 along the line."""
+    square = np.array([[[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]], float)
+    a = np.array([[0.0, 0.5, 0.0]])
+    k, size, length = np.array([4]), np.array([1.0]), np.array([0.5])
+    for d, crosses in (((1.0, 0.17), True), ((-1.0, 0.17), False), ((-1.0, -0.17), False)):
+        u = np.array([[d[0], d[1], 0.0]]) / np.hypot(*d)
+        w = np.cross([0.0, 0.0, 1.0], u)
+        assert _crossed(square, k, size, a, u, w, length, 1e-6)[0] == crosses, d
+    # A segment through the patch, from outside to outside, and one stopping short of it.
+    u = np.array([[1.0, 0.0, 0.0]])
+    w = np.cross([0.0, 0.0, 1.0], u)
+    start = np.array([[-0.5, 0.5, 0.0]])
+    assert _crossed(square, k, size, start, u, w, np.array([2.0]), 1e-6)[0]
+    assert not _crossed(square, k, size, start, u, w, np.array([0.4]), 1e-6)[0]

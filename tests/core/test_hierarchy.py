@@ -207,7 +207,8 @@ def t_junction_wall(float32_offset=None):
                                          [3, 4, 6, 5], [4, 2, 7, 6]], [1, 1, 0], RHO, LE)
 
 
-@pytest.mark.parametrize("rounds, offset", [(0, None), (3, None), (0, 50.0), (3, 50.0)])
+@pytest.mark.parametrize("rounds, offset", [(0, None), (3, None), (0, 50.0), (3, 50.0), (0, 3e4),
+                                           (3, 3e4)])
 def test_user_t_junctions_are_made_conforming(rounds, offset):
     scene = t_junction_wall(offset)
     patches = make_patches(scene, 0.7)         # misaligned points along the shared line
@@ -216,9 +217,13 @@ def test_user_t_junctions_are_made_conforming(rounds, offset):
     rng = np.random.default_rng(rounds)
     for _ in range(rounds):
         tree, _ = tree.split(rng.random(tree.n_leaves) < 0.4)
+    # At 30 km the float32 corners (2 mm apart from their true places) leave the quads warped:
+    # the scene's Newell area and the elements' triangles differ by 1.6e-4 (1e-3 allowed).
+    rtol = AREA_RTOL if offset is None else 1e-6 if offset < 1e3 else 1e-3
     np.testing.assert_allclose(np.bincount(tree.leaf_face, tree.areas, minlength=3),
-                               scene.face_areas, rtol=AREA_RTOL if offset is None else 1e-6)
-    assert _assert_conforming(scene, tree, on_segment=ON_SEGMENT_REL if offset is None else 1e-5) == [0]
+                               scene.face_areas, rtol=rtol)
+    assert _assert_conforming(scene, tree,
+                              on_segment=ON_SEGMENT_REL if offset is None else 1e-5) == [0]
 
 
 def test_floating_t_junctions_are_made_conforming():
