@@ -43,14 +43,29 @@ MIN_PIECE = 0.02
 #: 733 m read 74 % low at such corners).
 SNAP = 1e-9
 
+#: ... up to this fraction of the patch's size (half of MIN_PIECE): 1000 km from the origin the
+#: rounding is half a metre, and snapping that far moved the contact cuts of a 4 m room.
+SNAP_FLOAT32 = 0.01
 
-def _snapped(h, corners, size):
-    """Signed distances h (n, 4) of the corners from the line, 0 where they count as on it."""
-    near = np.maximum(SNAP * size, constants.tol.float32 * np.abs(corners).max(axis=(1, 2)))
-    return np.where(np.abs(h) <= near[:, None], 0.0, h)
+#: A patch whose size (square root of its area) is below this fraction of its diameter has no
+#: area (its corners on one line up to rounding): no line cuts it.
+FLAT = 1e-6
 
 #: Most cuts applied to one original patch (a patch under a chair leg meets 4 lines).
 MAX_CUTS = 8
+
+
+def _rounding(corners, size):
+    """(n,) float32 rounding of each patch's coordinates (``tol.float32``), at most
+    ``SNAP_FLOAT32`` of its size."""
+    return np.minimum(constants.tol.float32 * np.abs(corners).max(axis=(1, 2)),
+                      SNAP_FLOAT32 * size)
+
+
+def _snapped(h, corners, size):
+    """Signed distances h (n, 4) of the corners from the line, 0 where they count as on it."""
+    near = np.maximum(SNAP * size, _rounding(corners, size))
+    return np.where(np.abs(h) <= near[:, None], 0.0, h)
 
 
 def _unit(v):
@@ -172,7 +187,11 @@ def _crossed(corners, k, size, a, u, w, length, tol, along=False):
     t_out = np.maximum(np.where(cross, tc, -np.inf).max(axis=1),
                        np.where(on, t, -np.inf).max(axis=1))
     t_in = np.minimum(np.where(cross, tc, np.inf).min(axis=1), np.where(on, t, np.inf).min(axis=1))
-    return (h_max > margin) & (h_min < -margin) & (t_out > tol) & (t_in < length - tol)
+    # A patch with no area (its corners on one line: a sliver of rounding along an ear-clipping
+    # diagonal, 58 m from the origin) is never cut: its pieces would have no normal.
+    diameter = np.linalg.norm(corners - corners[:, :1], axis=2).max(axis=1)
+    return (h_max > margin) & (h_min < -margin) & (t_out > tol) & (t_in < length - tol) \
+        & (size > FLAT * diameter)
 
 
 def _clear_of_corners(corners, k, size, a, w, gap):
@@ -181,7 +200,7 @@ def _clear_of_corners(corners, k, size, a, w, gap):
     that, nor nearer than float32 rounding of the coordinates: a line that meets a patch's
     edge next to its corner would make a needle)."""
     h = _snapped(np.einsum("ikj,ij->ik", corners - a[:, None, :], w), corners, size)
-    need = np.maximum(gap * size, constants.tol.float32 * np.abs(corners).max(axis=(1, 2)))
+    need = np.maximum(gap * size, _rounding(corners, size))
     nxt = (np.arange(4)[None, :] + 1) % k[:, None]
     hn = np.take_along_axis(h, nxt, axis=1)
     edge = np.linalg.norm(np.take_along_axis(corners, nxt[:, :, None], axis=1) - corners, axis=2)

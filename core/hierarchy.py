@@ -354,8 +354,9 @@ def _weld(xyz, obj, size):
     """Merge points of one object closer than WELD_REL x their local size.
 
     Returns unique points (V, 3), their objects (V,) and the point id of every input point.
-    Exact duplicates first; near ones by hashing on 8 half-shifted grids of twice the largest tolerance (two points
-    within half a cell share a cell in one of them), joined by connected components.
+    Exact duplicates first; near ones by hashing on 8 half-shifted grids of twice the largest
+    tolerance (two points within half a cell share a cell in one of them), joined by connected
+    components.
     """
     rows = np.column_stack([obj.astype(np.float64), xyz])
     uniq, inv = np.unique(rows, axis=0, return_inverse=True)

@@ -196,7 +196,10 @@ def _intersect(o, d, dn, v0, e1, e2, scale):
     p = _cross(d, e2)
     det = _dot(e1, p)
     ok = np.abs(det) > tol.ray_parallel * scale * dn
-    inv = np.divide(1.0, det, out=np.zeros_like(det), where=ok)
+    # Only ok lanes are divided (|det| > 1e-12 x sizes: no overflow), but NumPy's masked loop
+    # may raise the overflow flag for the others (a wall at z = 1e-300 gives subnormal dets).
+    with np.errstate(over="ignore"):
+        inv = np.divide(1.0, det, out=np.zeros_like(det), where=ok)
     s = o - v0
     u = _dot(s, p) * inv
     q = _cross(s, e1)
