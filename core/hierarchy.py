@@ -56,9 +56,8 @@ from .patches import (QUAD_CHILDREN, TRI_CHILDREN, Patches, assemble_patches, co
 WELD_REL = 1e-8
 
 #: A point lies inside an element edge (a T-junction) when its distance from the edge's line is
-#: at most this times the edge length (or FLOAT32_SLACK times the coordinates' magnitude within
-#: ON_EDGE_SLANT) and
-#: it is at least this far (relative) from both ends.
+#: at most this times the edge length (or FLOAT32_SLACK times the coordinates' magnitude, within
+#: ON_EDGE_SLANT) and it is at least this far (relative) from both ends.
 ON_EDGE_REL = 1e-6
 
 #: Blender hands over float32 coordinates: a vertex modelled on an edge is off its line by up to
