@@ -102,8 +102,8 @@ class Tolerances:
     point: float = 1e-9
     #: Blender hands over float32 coordinates: a vertex modelled on an edge or a line is off it by
     #: up to a few float32 roundings of the coordinates' magnitude (4 x 2**-23 of it; 1.4 cm at
-    #: 30 km from the origin). Points nearer each other than that are one point to the
-    #: conformity pass (:mod:`core.hierarchy`), so no cut may make a feature that small.
+    #: 30 km from the origin): the conformity pass (:mod:`core.hierarchy`) allows that much
+    #: off an edge, near its line only (``ON_EDGE_SLANT``).
     float32: float = 4.0 * 2.0 ** -23
 
 

@@ -36,16 +36,8 @@ from .patches import Patches, assemble_patches, material_table, triangle_mask
 MIN_PIECE = 0.02
 
 #: Corners nearer a cut line than this fraction of the patch size count as on the line:
-#: a crossing point computed beside such a corner could round onto it. So do corners within
-#: float32 rounding of their coordinates (``tol.float32``): the conformity pass takes points
-#: that near an edge as lying on it, so a crossing point beside such a corner would be welded
-#: into the neighbouring patches' edges as a needle (an office 30 km from the origin, a room at
-#: 733 m read 74 % low at such corners).
+#: a crossing point computed beside such a corner could round onto it.
 SNAP = 1e-9
-
-#: ... up to this fraction of the patch's size (half of MIN_PIECE): 1000 km from the origin the
-#: rounding is half a metre, and snapping that far moved the contact cuts of a 4 m room.
-SNAP_FLOAT32 = 0.01
 
 #: A patch whose size (square root of its area) is below this fraction of its diameter has no
 #: area (its corners on one line up to rounding): no line cuts it.
@@ -55,17 +47,9 @@ FLAT = 1e-6
 MAX_CUTS = 8
 
 
-def _rounding(corners, size):
-    """(n,) float32 rounding of each patch's coordinates (``tol.float32``), at most
-    ``SNAP_FLOAT32`` of its size."""
-    return np.minimum(constants.tol.float32 * np.abs(corners).max(axis=(1, 2)),
-                      SNAP_FLOAT32 * size)
-
-
-def _snapped(h, corners, size):
+def _snapped(h, size):
     """Signed distances h (n, 4) of the corners from the line, 0 where they count as on it."""
-    near = np.maximum(SNAP * size, _rounding(corners, size))
-    return np.where(np.abs(h) <= near[:, None], 0.0, h)
+    return np.where(np.abs(h) <= SNAP * size[:, None], 0.0, h)
 
 
 def _unit(v):
@@ -197,17 +181,15 @@ def _crossed(corners, k, size, a, u, w, length, tol, along=False):
 def _clear_of_corners(corners, k, size, a, w, gap):
     """(n,) bool: where the line (a, w) crosses an edge of the patch, the crossing point is at
     least ``gap`` x ``size`` from both ends of that edge (the cut leaves no edge shorter than
-    that, nor nearer than float32 rounding of the coordinates: a line that meets a patch's
-    edge next to its corner would make a needle)."""
-    h = _snapped(np.einsum("ikj,ij->ik", corners - a[:, None, :], w), corners, size)
-    need = np.maximum(gap * size, _rounding(corners, size))
+    that: a line that meets a patch's edge next to its corner would make a needle)."""
+    h = _snapped(np.einsum("ikj,ij->ik", corners - a[:, None, :], w), size)
     nxt = (np.arange(4)[None, :] + 1) % k[:, None]
     hn = np.take_along_axis(h, nxt, axis=1)
     edge = np.linalg.norm(np.take_along_axis(corners, nxt[:, :, None], axis=1) - corners, axis=2)
     cross = (np.arange(4)[None, :] < k[:, None]) & (h * hn < 0)
     t = np.where(cross, h / np.where(cross, h - hn, 1.0), 0.5)
     near = np.minimum(t, 1.0 - t) * edge
-    return np.all(~cross | (near >= need[:, None]), axis=1)
+    return np.all(~cross | (near >= gap * size[:, None]), axis=1)
 
 
 def _box_pairs(lo_a, hi_a, lo_b, hi_b, cell):
@@ -428,15 +410,14 @@ def _cut(corners, k, a, w, size):
     becomes a quad and a triangle. Crossing points are computed from the edge's endpoints in a
     canonical order, so the two patches sharing an edge place bit-identical points on it.
 
-    Corners within ``SNAP x size`` of the line or float32 rounding (:func:`_snapped`) count as
-    on it (no crossing point is made next to them, which rounding could put on the corner
-    itself), and a patch the line does not cross
+    Corners within ``SNAP x size`` of the line count as on it (no crossing point is made next to
+    them, which rounding could put on the corner itself), and a patch the line does not cross
     by more than ``MIN_PIECE x size`` on both sides is returned whole: no piece can be
     degenerate (every piece has a corner at least ``MIN_PIECE x size`` from the line and two
     distinct points on it).
     """
     n = corners.shape[0]
-    h = _snapped(np.einsum("ikj,ij->ik", corners - a[:, None, :], w), corners, size)
+    h = _snapped(np.einsum("ikj,ij->ik", corners - a[:, None, :], w), size)
     slot_ok = np.arange(4)[None, :] < k[:, None]
     margin = MIN_PIECE * size
     crossed = ((np.where(slot_ok, h, -np.inf).max(axis=1) > margin)
