@@ -45,10 +45,9 @@ def test_regression_furnace_733m_from_the_origin(shadow_cuts):
     (core.hierarchy) allows between a point and an edge it lies on. A contact cut crossed a
     patch edge 0.1 mm from a corner, that point was taken as lying on the neighbours' edges,
     and zero-area triangles' corners read 2.23 for 8.66 (18 corners; 23 with shadow cuts).
-    Cuts now count corners within float32 rounding as on the line (core.contacts._snapped),
-    shadow lines cut only patches they run into, and the conformity pass takes a point as
-    on an edge within float32 rounding only inside a 3-degree lens from the edge's ends
-    (core.hierarchy.ON_EDGE_SLANT)."""
+    The conformity pass now takes a point as on an edge within float32 rounding only inside a
+    3-degree lens from the edge's ends (core.hierarchy.ON_EDGE_SLANT), and shadow lines cut
+    only the patches they run into (core.contacts._crossed)."""
     rho, le = 0.7422501474869286, 2.2330048150040147
     scene = _furnace(_octagon_room_733m(), rho, le, 1.0, (733.6931775714288, 0.0, 0.0))
     result = bake(scene, BakeSettings(output_mode="mesh", patch_size=1.3460178887089005,
