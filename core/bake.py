@@ -25,7 +25,7 @@ from .colours import corner_colours
 from .contacts import find_contacts, split_at_contacts
 from .criteria import cavity_mask, face_variation, near_emitter_mask, unlit_late_nodes
 from .emitters import Emitters, exact_materials
-from .footlines import foot_lines
+from .footlines import foot_lines, shadow_lines
 from .lights import DirectLight
 from .light_list import Lights, make_lights
 from .duplicates import (duplicate_warning, fill_duplicate_colours, merge_duplicates,
@@ -351,6 +351,16 @@ def relight(result, *, reflectance=None, emission=None, back_emission=None, ligh
     if not np.any(new_scene.emission[state.patches.material] > 0) \
             and new_scene.lights is None and scene.world is None:
         raise ValueError("emission leaves no emitting patch: nothing to light the scene")
+    if ("lights" in changes or "emission" in changes or "back_emission" in changes) \
+            and _lines_moved(state, new_scene):
+        # The patches were cut along the old lights' shadow lines: keeping them would leave
+        # the new shadows' edges smeared and the old ones cut for nothing (a moved bulb read up
+        # to 2.6 % off a fresh bake, tests/core/test_recolour.py). Bake the new scene.
+        again = bake(new_scene, state.settings, progress=progress, cancel=cancel)
+        again.report.setdefault("warnings", []).append(
+            "relight: the shadow lines (Cut at Shadows) moved with the new lights, so the "
+            "scene was baked again (form factors not reused)")
+        return again
     monitor = Monitor(progress, cancel)
     t_start = time.perf_counter()
     st = state.settings
@@ -376,6 +386,19 @@ def relight(result, *, reflectance=None, emission=None, back_emission=None, ligh
         return _run(new_scene, state.settings, state.patches, monitor, t_start=t_start,
                     timings={"patches": 0.0}, kept=state, on_contact=state.on_contact,
                     contact_lines=state.contact_lines)
+
+
+def _lines_moved(state, new_scene):
+    """Whether the shadow lines (``shadow_cuts``) of ``new_scene`` differ from those of the
+    bake in ``state``: a light moved, or a change of power made a light count at a corner or
+    stop counting (core.footlines). Both are drawn on the bake's patches, which cover the
+    same surfaces as the patches the bake drew its lines on."""
+    st = state.settings
+    if not (st.shadow_cuts and st.contact_cuts) or state.contact_lines is None:
+        return False
+    old, new = (shadow_lines(scene, state.patches, state.contact_lines, st.contrast,
+                             st.min_element) for scene in (state.scene, new_scene))
+    return not all(a.shape == b.shape and np.array_equal(a, b) for a, b in zip(old, new))
 
 
 def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_contact=None,

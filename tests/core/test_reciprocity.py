@@ -73,6 +73,32 @@ def test_make_reciprocal_leaves_reciprocal_rows_alone():
     assert info["asymmetry_before"] < 1e-12
 
 
+def test_rows_the_passes_leave_off_are_scaled_back_to_their_sums(monkeypatch):
+    # Two nodes that see each other unequally (0.02 against 0.008, equal areas) have no
+    # symmetric scaling. Given one pass and no drift rule, the scaling stops on them with their
+    # rows off; the repair scales each row back to its own sum, so no energy is made or lost,
+    # and rebalance (a relight) rebuilds the repaired matrix bit for bit.
+    monkeypatch.setattr(reciprocity, "SINKHORN_PASSES", 1)
+    monkeypatch.setattr(reciprocity, "SINKHORN_DRIFT", np.inf)
+    rng = np.random.default_rng(5)
+    n = 30
+    F = _random_rows(n, rng)
+    F[-2:], F[:, -2:] = 0.0, 0.0
+    F[-2, -1], F[-1, -2] = 0.02, 0.008
+    areas = np.r_[rng.uniform(0.05, 2.0, n - 2), 0.01, 0.01]
+    out, info, found = make_reciprocal(F, areas, return_balance=True)
+    assert info["row_sum_error"] > reciprocity.SINKHORN_FAIL      # the passes left rows off
+    assert info["rows_repaired"] >= 2 and info["unscaled"] == 0
+    np.testing.assert_allclose(out.sum(axis=1), F.sum(axis=1),
+                               rtol=reciprocity.RECIPROCITY_TOL * 1.01)
+    np.testing.assert_allclose(out[found.rows].sum(axis=1), F[found.rows].sum(axis=1),
+                               rtol=1e-12)
+    np.testing.assert_array_equal(reciprocity.rebalance(F, areas, found), out)
+    # The rows that converged are reciprocal as before.
+    G = areas[:n - 2, None] * out[:n - 2, :n - 2]
+    np.testing.assert_allclose(G, G.T, rtol=0, atol=1e-3 * G.max())
+
+
 def test_make_reciprocal_input_not_mutated():
     rng = np.random.default_rng(3)
     F = _random_rows(10, rng)
