@@ -26,7 +26,7 @@ from .contacts import find_contacts, split_at_contacts
 from .criteria import cavity_mask, face_variation, near_emitter_mask, unlit_late_nodes
 from .emitters import Emitters, exact_materials
 from .footlines import foot_lines, shadow_lines
-from .lights import DirectLight
+from .lights import DirectLight, same_geometry
 from .light_list import Lights, make_lights
 from .duplicates import (duplicate_warning, fill_duplicate_colours, merge_duplicates,
                          near_duplicate_warning)
@@ -351,8 +351,7 @@ def relight(result, *, reflectance=None, emission=None, back_emission=None, ligh
     if not np.any(new_scene.emission[state.patches.material] > 0) \
             and new_scene.lights is None and scene.world is None:
         raise ValueError("emission leaves no emitting patch: nothing to light the scene")
-    if ("lights" in changes or "emission" in changes or "back_emission" in changes) \
-            and _lines_moved(state, new_scene):
+    if "lights" in changes and _lines_moved(state, new_scene):
         # The patches were cut along the old lights' shadow lines: keeping them would leave
         # the new shadows' edges smeared and the old ones cut for nothing (a moved bulb read up
         # to 2.6 % off a fresh bake, tests/core/test_recolour.py). Bake the new scene.
@@ -389,16 +388,25 @@ def relight(result, *, reflectance=None, emission=None, back_emission=None, ligh
 
 
 def _lines_moved(state, new_scene):
-    """Whether the shadow lines (``shadow_cuts``) of ``new_scene`` differ from those of the
-    bake in ``state``: a light moved, or a change of power made a light count at a corner or
-    stop counting (core.footlines). Both are drawn on the bake's patches, which cover the
-    same surfaces as the patches the bake drew its lines on."""
+    """Whether the point, spot and sun lights of ``new_scene`` moved (or came or went) and so
+    moved the shadow lines (``shadow_cuts``) that cut the bake's patches.
+
+    A change of power or colour keeps the bake's lines, as it keeps its elements and radiosity
+    mesh (placed where the bake's light changes): the light groups' relights (a group at power
+    0) must share the bake's patches to add up. Both sets of lines are drawn on the bake's
+    patches, which cover the same surfaces as those the bake drew its lines on.
+    """
     st = state.settings
     if not (st.shadow_cuts and st.contact_cuts) or state.contact_lines is None:
         return False
-    old, new = (shadow_lines(scene, state.patches, state.contact_lines, st.contrast,
-                             st.min_element) for scene in (state.scene, new_scene))
-    return not all(a.shape == b.shape and np.array_equal(a, b) for a, b in zip(old, new))
+    old = state.scene.lights
+    new = new_scene.lights
+    if (old is None and new is None) or (old is not None and new is not None
+                                         and same_geometry(old, new)):
+        return False
+    a, b = (shadow_lines(scene, state.patches, state.contact_lines, st.contrast,
+                         st.min_element) for scene in (state.scene, new_scene))
+    return not all(x.shape == y.shape and np.array_equal(x, y) for x, y in zip(a, b))
 
 
 def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_contact=None,

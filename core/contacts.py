@@ -162,12 +162,10 @@ def _crossed(corners, k, size, a, u, w, length, tol, along=False):
         t_max = np.where(slot_ok, t, -np.inf).max(axis=1)
         t_min = np.where(slot_ok, t, np.inf).min(axis=1)
         return (h_max >= -tol) & (h_min <= tol) & (t_max > tol) & (t_min < length - tol)
-    nxt = (np.arange(4)[None, :] + 1) % k[:, None]
-    hn = np.take_along_axis(h, nxt, axis=1)
+    nxt, cross, frac = _edge_crossings(h, k)
     tn = np.take_along_axis(t, nxt, axis=1)
-    cross = slot_ok & (h * hn < 0)
     on = slot_ok & (h == 0)
-    tc = t + (tn - t) * np.where(cross, h / np.where(cross, h - hn, 1.0), 0.0)
+    tc = t + (tn - t) * frac
     t_out = np.maximum(np.where(cross, tc, -np.inf).max(axis=1),
                        np.where(on, t, -np.inf).max(axis=1))
     t_in = np.minimum(np.where(cross, tc, np.inf).min(axis=1), np.where(on, t, np.inf).min(axis=1))
@@ -183,13 +181,21 @@ def _clear_of_corners(corners, k, size, a, w, gap):
     least ``gap`` x ``size`` from both ends of that edge (the cut leaves no edge shorter than
     that: a line that meets a patch's edge next to its corner would make a needle)."""
     h = _snapped(np.einsum("ikj,ij->ik", corners - a[:, None, :], w), size)
+    nxt, cross, frac = _edge_crossings(h, k)
+    edge = np.linalg.norm(np.take_along_axis(corners, nxt[:, :, None], axis=1) - corners, axis=2)
+    near = np.minimum(frac, 1.0 - frac) * edge
+    return np.all(~cross | (near >= gap * size[:, None]), axis=1)
+
+
+def _edge_crossings(h, k):
+    """Where a line crosses the edges of patches of ``k`` (n,) corners, from the corners'
+    signed distances ``h`` (n, 4) to it: each edge's far corner ``nxt`` (n, 4), whether the
+    line crosses the edge strictly (n, 4) bool, and the crossing's fraction along it (0 where it
+    does not cross)."""
     nxt = (np.arange(4)[None, :] + 1) % k[:, None]
     hn = np.take_along_axis(h, nxt, axis=1)
-    edge = np.linalg.norm(np.take_along_axis(corners, nxt[:, :, None], axis=1) - corners, axis=2)
     cross = (np.arange(4)[None, :] < k[:, None]) & (h * hn < 0)
-    t = np.where(cross, h / np.where(cross, h - hn, 1.0), 0.5)
-    near = np.minimum(t, 1.0 - t) * edge
-    return np.all(~cross | (near >= gap * size[:, None]), axis=1)
+    return nxt, cross, np.where(cross, h / np.where(cross, h - hn, 1.0), 0.0)
 
 
 def _box_pairs(lo_a, hi_a, lo_b, hi_b, cell):

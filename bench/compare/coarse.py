@@ -378,8 +378,12 @@ def adaptive_runs(args):
     runs += [("adaptive min_element %g" % m, dict(min_element=m)) for m in args.min_elements]
     runs += [("adaptive emitters %s" % e, dict(exact_direct=e)) for e in args.exact_direct]
     runs += [("adaptive method %s" % m, dict(method=m)) for m in args.methods]
-    if args.shadow_cuts:
-        runs.append(("adaptive with shadow cuts", dict(shadow_cuts=True)))
+    if args.shadow_cuts:          # the other side of the default
+        from core.settings import BakeSettings
+
+        on = not BakeSettings().shadow_cuts
+        runs.append(("adaptive %s shadow cuts" % ("with" if on else "without"),
+                     dict(shadow_cuts=on)))
     return runs
 
 
@@ -550,7 +554,8 @@ def main(argv=None):
     ap.add_argument("--methods", nargs="*", default=[],
                     help="also run these form-factor methods (core.settings.METHODS)")
     ap.add_argument("--shadow-cuts", action="store_true",
-                    help="also bake with shadow_cuts=True (core.footlines)")
+                    help="also bake with shadow_cuts the other way from its default "
+                         "(core.footlines)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--cache", default=str(ROOT / "bench" / "results" / "cache"))
     ap.add_argument("--out", default=str(ROOT / "bench" / "results"))

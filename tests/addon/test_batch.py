@@ -130,12 +130,12 @@ def test_element_levels_reach_the_bake(package, tmp_path):
 
 def test_contact_cuts_reach_the_bake(package, tmp_path):
     # The Cornell box's blocks stand on the floor: the default bake cuts the floor's patches
-    # along their outlines, --shadow-cuts along the shadow lines that leave their corners too,
-    # --no-contact-cuts cuts nothing.
+    # along their outlines and the shadow lines that leave their corners (--shadow-cuts),
+    # --no-shadow-cuts along the outlines only, --no-contact-cuts cuts nothing.
     src = tmp_path / "cornell.blend"
     shutil.copyfile(CORNELL, src)
     reports = {}
-    for name, extra in (("outlines", []), ("off", ["--no-contact-cuts"]),
+    for name, extra in (("outlines", ["--no-shadow-cuts"]), ("off", ["--no-contact-cuts"]),
                         ("on", ["--shadow-cuts"])):
         proc = run_batch(src, "--output", tmp_path / ("%s.blend" % name), "--report",
                          tmp_path / ("%s.json" % name), *FAST, *extra)

@@ -59,11 +59,14 @@ def test_new_power_and_colour_give_a_fresh_bake_without_a_shadow_ray():
                                rtol=1e-9, atol=1e-15)
 
 
-def test_lights_relit_alone_add_up_to_the_bake_on_its_mesh(monkeypatch):
+@pytest.mark.parametrize("shadow_cuts", [False, True])
+def test_lights_relit_alone_add_up_to_the_bake_on_its_mesh(monkeypatch, shadow_cuts):
     # No culling (core.lights.CULL): a culled light counts unshadowed where the bake skipped
     # it, so the parts would add up only to within CULL. Direct solve (few nodes): exact.
+    # With the shadow lines a light at power 0 keeps the bake's lines (and patches): the light
+    # groups' parts must share them to add up.
     monkeypatch.setattr(lights_module, "CULL", 0.0)
-    s = BakeSettings(exact_direct="all", vertex_budget=1500)
+    s = BakeSettings(exact_direct="all", vertex_budget=1500, shadow_cuts=shadow_cuts)
     first = [BULB, SPOT]
     base = bake(_scene(first), s)
     assert base.report["solver"] == "direct"
@@ -131,8 +134,8 @@ def test_a_light_moved_or_resized_is_not_recoloured(field, value):
 def test_lights_that_move_the_shadow_lines_bake_again():
     # With shadow_cuts the patches are cut along each light's shadow lines from the box's feet:
     # a relight that keeps them after the bulb has moved keeps the old lines (up to 2.6 % off
-    # a fresh bake). A change of power that leaves the lines where they were keeps the bake's
-    # form factors; one that moves them bakes again, and says so.
+    # a fresh bake). A change of power keeps the bake's lines and form factors, as it keeps its
+    # elements; lights that move the lines bake again, and say so.
     s = BakeSettings(output_mode="vertices", element_levels=0, shadow_cuts=True)
     base = bake(_scene([BULB]), s)
     assert base.report["contacts"]["shadow_lines"] > 0
