@@ -435,9 +435,13 @@ def test_a_light_group_alone_equals_a_fresh_bake_with_the_other_light_off(packag
     # Oracle: a fresh bake of the scene with the other light's power set to 0. "Bulb" is cast
     # alone, "Spot" is then the rest of the lights' solution (no cast): without culling both
     # within the two solves' tolerance; with it up to CULL x the light there more (see CULL).
+    # Without the shadow lines: with them, the patches follow the lights' powers (a light off
+    # draws no lines), so the fresh bake with a light off is cut otherwise than the bake its
+    # group comes from (2.3 % apart at a corner by the block here), as the radiosity mesh
+    # follows the light; tests/core/test_recolour.py checks the groups' sum with the lines on.
     monkeypatch.setattr(PACKAGE.core.lights, "CULL", cull)
     objects, (bulb, spot) = two_lights()
-    bake()
+    bake(shadow_cuts=False)
     full = [colours_and_lux(o) for o in objects]
     groups = bpy.context.scene.radiosity_groups
     assert [g.name for g in groups] == ["Bulb", "Spot"]
