@@ -248,8 +248,8 @@ TABLE = (
             "object's corners on the surface it stands on, towards each light, so a penumbra "
             "narrower than any element is drawn along its edges",
             exposed=True,
-            doc="core.footlines. Cornell box (coarse) 2.86 % -> 2.50 % against Cycles, 1.02x "
-                "the time; office 3.48 % -> 3.45 % at 14,589 vertices (14,604 without). On by "
+            doc="core.footlines. Cornell box (coarse) 2.86 % -> 2.70 % against Cycles; office "
+                "3.48 % -> 3.45 % at 14,589 vertices (14,604 without). On by "
                 "default since the three failures it brought out are fixed: the far-from-origin "
                 "slivers (stability class 10 reads 0.0007 % with it on), the reciprocity "
                 "scaling that left a strip beside a shelf 1 % low in the furnace office (its "
