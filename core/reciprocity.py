@@ -5,11 +5,11 @@ different sizes disagree about their exchange, and the energy balance shows it.
 :func:`make_reciprocal` makes ``A_i F_ij = A_j F_ji`` exact while keeping every row's sum
 (symmetric Sinkhorn scaling), so a closed scene still passes the white furnace test.
 
-Where the scaling cannot meet every row sum in its passes (groups of patches with no symmetric
-solution, in the furnace office with shadow lines as many as a third of the nodes), the rows
-still off are scaled back to their own sums (``Balance.rows``): the energy balance always holds,
-and reciprocity is exact wherever the scaling converged and off by at most that row's error
-elsewhere.
+Groups of nodes with no symmetric solution (pieces shut inside or behind furniture) make their
+scales diverge: each pass drops them (``SINKHORN_DRIFT``) and balances the rest. Should the
+passes run out with rows still off, those rows are scaled back to their own sums
+(``Balance.rows``): the energy balance always holds, and reciprocity is exact wherever the
+scaling converged and off by at most that row's error elsewhere.
 
 The scaling depends on the form factors and the areas only: :func:`make_reciprocal` returns it
 as a :class:`Balance` if asked, and :func:`rebalance` rebuilds the same reciprocal matrix (bit
@@ -175,10 +175,10 @@ def make_reciprocal(F, areas, *, tol=RECIPROCITY_TOL, max_iterations=RECIPROCITY
     # by the very code a relight runs, so the two agree bit for bit.
     S = rebalance(F, areas, found, out=S, monitor=monitor)
     if err > tol:
-        # The passes ran out with rows off (a group with no symmetric solution that the pinning
-        # did not isolate in SINKHORN_PASSES): each such row is scaled back to its own sum, so
-        # no energy is made or lost (the furnace office with shadow lines read 0.9 % low at a
-        # strip whose row the scaling left 5.7 % short; tests/core/test_reciprocity.py).
+        # The passes ran out with rows off (a group with no symmetric solution that they did not
+        # isolate in SINKHORN_PASSES): each such row is scaled back to its own sum, so no energy
+        # is made or lost (before SINKHORN_DRIFT, the furnace office with shadow lines ended
+        # with rows 5.7 % off; tests/core/test_reciprocity.py).
         got = S.sum(axis=1, dtype=np.float64)
         scaled = np.ones(n, dtype=bool)
         scaled[idx] = False
