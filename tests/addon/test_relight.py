@@ -555,3 +555,23 @@ def test_a_group_change_makes_that_group_alone_once(package, monkeypatch):
     assert calls == [["emission", "lights"], ["emission"]]
     groups["Bulb"].tint, groups["Spot"].strength = (1.0, 0.5, 0.2), 2.0
     assert len(calls) == 2
+
+
+def test_relight_that_moves_the_shadow_lines_bakes_again(package, fixed_cubes):
+    # With Cut at Shadows (the default) the patches are cut along the lines each light draws
+    # from the block's feet: moving the bulb moves its lines, so Relight bakes the scene again
+    # (core.relight says so in the report) and writes what a fresh bake writes; keeping the
+    # bake's patches would keep the old lines.
+    objects, (bulb, spot) = two_lights()
+    bake(output_mode="MESH", shadow_cuts=True)
+    baked = json.loads(bpy.context.scene.radiosity.last_report)
+    assert baked["contacts"]["shadow_lines"] > 0
+    bulb.location = (-0.7, 0.8, 0.0)
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    report = json.loads(bpy.context.scene.radiosity.last_report)
+    assert any("baked again" in w for w in report["warnings"])
+    relit = [colours_and_lux(o) for o in objects]
+    expected = fresh(*objects)
+    for (col, lux), (e_col, e_lux) in zip(relit, expected):
+        assert col.shape == e_col.shape                # the same radiosity mesh
+        assert_close((col, lux), (e_col, e_lux))
