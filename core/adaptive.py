@@ -338,11 +338,17 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
     outline = contact_edges(scene, tree, contacts)
     steps = []
     budget_hit = False
+    # A split keeps the old points and appends new ones: only those are tested against the
+    # contact lines (each test costs points x segments; the office's 14,669 points against
+    # its lines took 0.28 s per level, every level).
+    alone = np.zeros(0, dtype=bool)
     for level in range(MAX_LEVELS + 1):
         t0 = time.perf_counter()
         conf = tree.conforming()
         leaf_scene = _leaf_scene(scene, tree, conf, flipped)
-        alone = contact_points(tree.points, contacts) | contact_points(tree.points, outline)
+        fresh = tree.points[alone.size:]
+        alone = np.concatenate([alone, contact_points(fresh, contacts)
+                                | contact_points(fresh, outline)])
         groups = corner_groups(leaf_scene, crease_angle=settings.crease_angle, on_contact=alone)
         keys = _group_keys(leaf_scene, groups, alone)
         ids = cache.lookup(keys)
