@@ -167,7 +167,7 @@ class DirectLight:
         lights.
     """
 
-    def __init__(self, lights, patches, samples=16, world=None, min_size=0.0, emitters=None):
+    def __init__(self, lights, patches, samples=64, world=None, min_size=0.0, emitters=None):
         self.lights = lights if lights is not None else make_lights([])
         self.emitters = emitters if emitters is not None and len(emitters) else None
         n_e = 0 if self.emitters is None else len(self.emitters)

@@ -185,22 +185,26 @@ def run(case, args):
     arrays["object_names"] = tuple("%03d_%s" % (i, n) for i, n in enumerate(arrays["object_names"]))
     scene = make_scene(**arrays, lights=CASES[case] or None, world=world)
     names = [str(n) for n in arrays["object_names"]]
-    res, wall, cpu = coarse.timed_bake(scene, output_mode="mesh")
-    m = res.output
-    group = coarse.groups_of(dict(object_names=names, face_objects=scene.face_objects[
-        m.face_parent]), ref.names)
-    colours, misses = ref.sample(m.vertices, m.corner_verts, m.face_starts, m.face_sizes, group,
-                                 m.corner_colours)
-    err, fv = ref.measure(colours)
-    rows.append(dict(case=case, method="ours (defaults)", samples="", vertices=len(m.vertices),
-                     t_total=wall, cpu=cpu, misses=misses, **err))
-    print("%s: ours %.2f %% (bias %+.2f %%, without the worst %d faces %.2f %%), %d vertices, "
-          "%.1f s; reference noise %.2f %%" % (case, 100 * err["rms"], 100 * err["bias"],
-                                               coarse.WORST, 100 * err["rms_rest"],
-                                               len(m.vertices), wall, 100 * ref.noise["rms"]))
-    print("   " + ref.worst(fv))
-    for line in ref.worst_faces(fv, top=4):
-        print("   " + line)
+    for n in [None] + list(args.light_samples):
+        kw = {} if n is None else dict(light_samples=n)
+        label = "ours (defaults)" if n is None else "ours (light_samples %d)" % n
+        res, wall, cpu = coarse.timed_bake(scene, output_mode="mesh", **kw)
+        m = res.output
+        group = coarse.groups_of(dict(object_names=names, face_objects=scene.face_objects[
+            m.face_parent]), ref.names)
+        colours, misses = ref.sample(m.vertices, m.corner_verts, m.face_starts, m.face_sizes,
+                                     group, m.corner_colours)
+        err, fv = ref.measure(colours)
+        rows.append(dict(case=case, method=label, samples="" if n is None else n,
+                         vertices=len(m.vertices), t_total=wall, cpu=cpu, misses=misses, **err))
+        print("%s: %s %.2f %% (bias %+.2f %%, without the worst %d faces %.2f %%), %d vertices, "
+              "%.1f s; reference noise %.2f %%" % (case, label, 100 * err["rms"],
+                                                   100 * err["bias"], coarse.WORST,
+                                                   100 * err["rms_rest"], len(m.vertices), wall,
+                                                   100 * ref.noise["rms"]))
+        print("   " + ref.worst(fv))
+        for line in ref.worst_faces(fv, top=4):
+            print("   " + line)
     for spp in args.cycles_samples:
         cc, sec, cyc_cpu = coarse.cycles_cached("lights_%s" % case, blend, ref.sc, spp, 100,
                                                 args.cache, args.threads)
@@ -223,6 +227,8 @@ def main(argv=None):
     ap.add_argument("--reference-samples", type=int, default=1024)
     ap.add_argument("--reference-seeds", type=int, default=2)
     ap.add_argument("--cycles-samples", type=int, nargs="*", default=[16, 64])
+    ap.add_argument("--light-samples", type=int, nargs="*", default=[],
+                    help="also bake with these light_samples (shadow rays in penumbrae)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--cache", default=str(ROOT / "bench" / "results" / "cache"))
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "lights.csv"))
