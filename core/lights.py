@@ -49,6 +49,7 @@ from .exact import bilinear, gauss_square, ray_triangles
 from .geometry import unit_frames
 from .light_list import make_lights
 from .raycast import any_hit, build_bvh
+from .settings import BY_NAME
 from .shadow_memo import ShadowMemo, point_keys
 from .sky import Sky
 
@@ -167,7 +168,8 @@ class DirectLight:
         lights.
     """
 
-    def __init__(self, lights, patches, samples=64, world=None, min_size=0.0, emitters=None):
+    def __init__(self, lights, patches, samples=BY_NAME["light_samples"].default, world=None,
+                 min_size=0.0, emitters=None):
         self.lights = lights if lights is not None else make_lights([])
         self.emitters = emitters if emitters is not None and len(emitters) else None
         n_e = 0 if self.emitters is None else len(self.emitters)
