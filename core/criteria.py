@@ -500,7 +500,7 @@ def near_surfaces(patches, *, chunk=CAVITY_CHUNK):
         box_lo, box_hi = centres[p].min(axis=0) - reach, centres[p].max(axis=0) + reach
         q = np.flatnonzero(np.all((centres >= box_lo) & (centres <= box_hi), axis=1))
         d = centres[None, q, :] - centres[p, None, :]
-        overlap = np.linalg.norm(d, axis=2) < radius[p, None] + radius[None, q]
+        overlap = np.sqrt(np.einsum("pqk,pqk->pq", d, d)) < radius[p, None] + radius[None, q]
         plane_p = np.abs(np.einsum("pqk,pk->pq", d, normals[p]))
         plane_q = np.abs(np.einsum("pqk,qk->pq", d, normals[q]))
         apart = (plane_p > COPLANAR * radius[p, None]) & (plane_q > COPLANAR * radius[None, q])

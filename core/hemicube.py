@@ -360,7 +360,11 @@ def _filled(sc, eyes, frames, out, sky_out):
 
 
 def drawn_polygons(patches, normals):
-    """(polys, poly_patch, Geometry) of ``patches``, from the cache when it holds them."""
+    """(polys, poly_patch, Geometry) of ``patches``: its own ``drawing`` when it carries one
+    (:class:`core.farfield.Drawn`), else from the cache when it holds them."""
+    ready = getattr(patches, "drawing", None)
+    if ready is not None:
+        return ready
     cached = _CACHE.get("patches")
     if cached is not None and cached() is patches:
         return _CACHE["data"]
