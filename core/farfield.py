@@ -67,10 +67,8 @@ class Union:
         self.slot = np.full(has.size, -1, dtype=np.int64)
         self.slot[self.patch_ids] = np.arange(self.patch_ids.size)
         whole = Drawn(Seen(patches, self.patch_ids), seen)
-        polys, self.poly_patch = draw_polygons(whole)
-        g = Geometry(polys, self.poly_patch, whole.normals)
-        self.verts, self.poly_v, self.plane_n, self.plane_c = g.verts, g.poly_v, g.plane_n, \
-            g.plane_c
+        polys, poly_patch = draw_polygons(whole)
+        self.geometry = Geometry(polys, poly_patch, whole.normals)
         self.n_items = self.patch_ids.size + seen.areas.size
 
     def cut(self, whole, near):
@@ -80,17 +78,9 @@ class Union:
         items = np.concatenate([self.slot[whole], self.patch_ids.size + near])
         local = np.full(self.n_items, -1, dtype=np.int64)
         local[items] = np.arange(items.size)
-        sel = np.flatnonzero(local[self.poly_patch] >= 0)
-        g = Geometry.__new__(Geometry)
-        g.poly_patch = local[self.poly_patch[sel]]
-        ids = self.poly_v[sel]
-        # The corners in use, in the union's (sorted) order: np.unique's answer without a sort.
-        mark = np.zeros(self.verts.shape[0], dtype=bool)
-        mark[ids] = True
-        g.verts = self.verts[mark]
-        g.poly_v = (np.cumsum(mark) - 1)[ids]
-        g.diag = float(np.linalg.norm(g.verts.max(axis=0) - g.verts.min(axis=0))) or 1.0
-        g.plane_n, g.plane_c = self.plane_n[sel], self.plane_c[sel]
+        item = self.geometry.poly_patch
+        sel = np.flatnonzero(local[item] >= 0)
+        g = self.geometry.cut(sel, local[item[sel]])
         return None, g.poly_patch, g
 
 

@@ -48,6 +48,21 @@ class Geometry:
         n /= np.where(length > 0, length, 1.0)[:, None]
         self.plane_n, self.plane_c = n, np.sum(n * polys[:, 0], axis=1)
 
+    def cut(self, sel, poly_patch):
+        """The Geometry of polygons ``sel`` (ascending) alone, their items numbered
+        ``poly_patch``: what drawing them alone gives. A polygon's plane is its own; the shared
+        corners are those they use, in this one's (sorted) order, found without a sort."""
+        g = Geometry.__new__(Geometry)
+        g.poly_patch = np.asarray(poly_patch, dtype=np.int64)
+        ids = self.poly_v[sel]
+        used = np.zeros(self.verts.shape[0], dtype=bool)
+        used[ids] = True
+        g.verts = self.verts[used]
+        g.poly_v = (np.cumsum(used) - 1)[ids]
+        g.diag = float(np.linalg.norm(g.verts.max(axis=0) - g.verts.min(axis=0))) or 1.0
+        g.plane_n, g.plane_c = self.plane_n[sel], self.plane_c[sel]
+        return g
+
 
 def _distinct_rows(flat):
     """``np.unique(flat, axis=0, return_inverse=True)`` for (N, 3) floats, three times as fast
