@@ -29,6 +29,7 @@ A point none of whose adjacent patches receives any light is not gathered (its r
 emission): surfaces no light reaches cost no hemicube.
 """
 
+import collections
 import dataclasses
 import time
 
@@ -40,10 +41,10 @@ from .duplicates import copy_duplicate_faces
 from .elements import bake_elements
 from .gather import borrow_at_vertex, NORMAL_DECIMALS, corner_groups, shade
 from .farfield import FarField, Seen, compact_with_sums, seen_subset
-from .geometry import spatial_order
+from .geometry import spatial_order, unique_rows
 from .hemicube import point_rows
 from .hierarchy import ElementTree, output_mesh
-from .parallel import Deferred
+from .parallel import AHEAD, Deferred
 from .progress import SubMonitor
 from .rows import RowStore
 from .scene import make_scene
@@ -199,8 +200,7 @@ class _Cache:
         if self.keys.shape[0] == 0:
             return np.full(keys.shape[0], -1, dtype=np.int64)
         both = np.concatenate([self.keys, keys])
-        _, inv = np.unique(both, axis=0, return_inverse=True)
-        inv = inv.reshape(-1)
+        inv = unique_rows(both)[1]
         where = np.full(inv.max() + 1, -1, dtype=np.int64)
         where[inv[:self.keys.shape[0]]] = np.arange(self.keys.shape[0])
         return where[inv[self.keys.shape[0]:]]
@@ -372,11 +372,12 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         vis = np.zeros(new.size, dtype=np.int64)
         batches = []
         pos_in_new = np.searchsorted(new, go)
-        # Each batch's hemicubes start (on the worker processes, if the bake uses them) before
-        # the previous batch's rows are used, so this process prepares the next batch
-        # meanwhile; batches are used in order, so nothing depends on the timing.
-        started = None
-        for s in range(0, go.size + GATHER_BATCH, GATHER_BATCH):
+        # Each batch's hemicubes start (on the worker processes, if the bake uses them) while
+        # the AHEAD batches before it are still to be used, so this process prepares batches
+        # meanwhile and a worker that finishes its part early has the next one queued;
+        # batches are used in order, so nothing depends on the timing.
+        started = collections.deque()
+        for s in range(0, go.size + AHEAD * GATHER_BATCH, GATHER_BATCH):
             ahead = None
             light = None
             if s < go.size:
@@ -396,19 +397,21 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
                 else:
                     ahead = far_field.rows(groups.points[g], groups.normals[g], compact=True,
                                            **kw)
-            if started is not None:
-                s0, (cols, vals, sums) = started[0], started[1].result()
+            if len(started) == AHEAD or (started and ahead is None):
+                s0, job, done_light = started.popleft()
+                cols, vals, sums = job.result()
                 at = pos_in_new[s0:s0 + GATHER_BATCH]
                 inc[at] = vals.astype(np.float64) @ seen_L[cols]
                 covered[at] = sums
                 if sky is not None:
-                    sky_in[at] = started[2]
+                    sky_in[at] = done_light
                 batches.append((at, cols, vals))
                 if gather_monitor is not None:
                     done = (s0 + vals.shape[0]) / go.size  # level k: [1 - 2^-k, 1 - 2^-(k+1)]
                     gather_monitor.update(1.0 - 0.5 ** level * (1.0 - 0.5 * done),
                                           f"mesh: level {level}, {tree.points.shape[0]} points")
-            started = None if ahead is None else (s, ahead, light)
+            if ahead is not None:
+                started.append((s, ahead, light))
         if go.size:
             vis[pos_in_new] = emitters.visibility(groups.points[go], groups.normals[go])
             if direct is not None:

@@ -30,7 +30,7 @@ from .lights import DirectLight, same_geometry
 from .light_list import Lights, make_lights
 from .duplicates import (duplicate_warning, fill_duplicate_colours, merge_duplicates,
                          near_duplicate_warning)
-from . import memory, parallel
+from . import blas, memory, parallel
 from .orient import orient
 from .patches import make_patches, subdivide_patches
 from .pipeline import (check_result, colours, form_factors, gathered_incident, make_gather,
@@ -433,24 +433,25 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
         timings["lights"] = time.perf_counter() - t0
         memory.mark("lights")
 
-    monitor.stage(*_STAGES["form_factors"])
-    monitor.update(0.0, "form factors")
-    t0 = time.perf_counter()
-    skip_late = None
-    if settings.output_mode == "mesh" and scene.world is None:  # unlit surfaces cost nothing
-        def skip_late(active, late):
-            return unlit_late_nodes(scene, patches, active, late, settings.resolution)
-    world = scene.world is not None
-    sky = None if direct is None else direct.sky        # a directional sky (core.sky)
-    if kept is None:
-        ff = form_factors(patches, nodes, settings, monitor, skip_late=skip_late, all_nodes=world,
-                          sky=sky)
-    else:
-        ff = form_factors(patches, nodes, settings, monitor, kept.store, kept.active,
-                          skip_late=skip_late, all_nodes=world, sky=sky)
-    monitor.update(1.0, "form factors done")
-    timings["form_factors"] = time.perf_counter() - t0
-    memory.mark("form_factors")
+    with blas.one_thread():           # the workers fill the cores (core.blas)
+        monitor.stage(*_STAGES["form_factors"])
+        monitor.update(0.0, "form factors")
+        t0 = time.perf_counter()
+        skip_late = None
+        if settings.output_mode == "mesh" and scene.world is None:  # unlit surfaces cost nothing
+            def skip_late(active, late):
+                return unlit_late_nodes(scene, patches, active, late, settings.resolution)
+        world = scene.world is not None
+        sky = None if direct is None else direct.sky        # a directional sky (core.sky)
+        if kept is None:
+            ff = form_factors(patches, nodes, settings, monitor, skip_late=skip_late,
+                              all_nodes=world, sky=sky)
+        else:
+            ff = form_factors(patches, nodes, settings, monitor, kept.store, kept.active,
+                              skip_late=skip_late, all_nodes=world, sky=sky)
+        monitor.update(1.0, "form factors done")
+        timings["form_factors"] = time.perf_counter() - t0
+        memory.mark("form_factors")
     nodes = with_world(nodes, ff.store.row_sums, scene.world, ff.store.sky)
 
     monitor.stage(*_STAGES["solve"])
@@ -461,51 +462,52 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
     timings["solve"] = time.perf_counter() - t0
     memory.mark("solve")
 
-    monitor.stage(*_STAGES["colours"])
-    monitor.update(0.0, "colours")
-    t0 = time.perf_counter()
-    # stability (issue 11): each face is baked on the side that receives the light (core.orient).
-    # The world lights every side open to it alike: which side faces the room is decided by the
-    # rest of the light.
-    oriented = sol
-    if nodes.sky is not None:
-        oriented = dataclasses.replace(sol,
-                                       incident=sol.incident - nodes.sky * nodes.areas[:, None])
-    side = orient(scene, patches, oriented.incident, settings.two_sided,
-                  kept.flipped if kept is not None else None, ff.store.row_sums)
-    shown = nodes.shown(sol.node_radiance)       # the transported radiance + exact emission
-    room_side = side.room_side(shown)
-    gather = kept.gather if kept is not None else None
-    mesh = mesh_report = None
-    if settings.output_mode == "mesh":
-        corner, mesh, gather, mesh_report = mesh_colours(
-            scene, settings, patches, sol.node_radiance, sol.incident, gather, contact_lines,
-            monitor, direct, lambda: corner_colours(scene, patches, room_side,
-                                                    crease_angle=settings.crease_angle),
-            flipped=side.flipped)
-        element_report = mesh_report.pop("elements", None)
-    elif settings.corners == "gather":
-        if gather is None:
-            gather = make_gather(side.scene, patches, sol.node_radiance, settings, monitor,
-                                 on_contact, direct)
-        corner, element_report = colours(side.scene, patches, sol.node_radiance, settings,
-                                         gather)
-    else:
-        corner, element_report = colours(side.scene, side.patches,
-                                         np.concatenate([room_side, shown[P:]]),
-                                         settings, gather)
-    corner = fill_duplicate_colours(scene, corner)       # stability (issue 11)
-    incident = None
-    if mesh is not None:
-        incident = np.zeros((scene.n_corners, 3))
-        has = gather.user >= 0
-        incident[has] = mesh.corner_incident[gather.user[has]]
-        incident = fill_duplicate_colours(scene, incident)
-    elif settings.corners == "gather":
-        incident = fill_duplicate_colours(scene, gathered_incident(side.scene, sol.node_radiance,
-                                                                   gather))
-    timings["colours"] = time.perf_counter() - t0
-    memory.mark("colours")
+    with blas.one_thread():           # the gathers: as the form factors
+        monitor.stage(*_STAGES["colours"])
+        monitor.update(0.0, "colours")
+        t0 = time.perf_counter()
+        # stability (issue 11): each face is baked on the side that receives the light
+        # (core.orient). The world lights every side open to it alike: which side faces the room
+        # is decided by the rest of the light.
+        oriented = sol
+        if nodes.sky is not None:
+            oriented = dataclasses.replace(sol,
+                                           incident=sol.incident - nodes.sky * nodes.areas[:, None])
+        side = orient(scene, patches, oriented.incident, settings.two_sided,
+                      kept.flipped if kept is not None else None, ff.store.row_sums)
+        shown = nodes.shown(sol.node_radiance)       # the transported radiance + exact emission
+        room_side = side.room_side(shown)
+        gather = kept.gather if kept is not None else None
+        mesh = mesh_report = None
+        if settings.output_mode == "mesh":
+            corner, mesh, gather, mesh_report = mesh_colours(
+                scene, settings, patches, sol.node_radiance, sol.incident, gather, contact_lines,
+                monitor, direct, lambda: corner_colours(scene, patches, room_side,
+                                                        crease_angle=settings.crease_angle),
+                flipped=side.flipped)
+            element_report = mesh_report.pop("elements", None)
+        elif settings.corners == "gather":
+            if gather is None:
+                gather = make_gather(side.scene, patches, sol.node_radiance, settings, monitor,
+                                     on_contact, direct)
+            corner, element_report = colours(side.scene, patches, sol.node_radiance, settings,
+                                             gather)
+        else:
+            corner, element_report = colours(side.scene, side.patches,
+                                             np.concatenate([room_side, shown[P:]]),
+                                             settings, gather)
+        corner = fill_duplicate_colours(scene, corner)       # stability (issue 11)
+        incident = None
+        if mesh is not None:
+            incident = np.zeros((scene.n_corners, 3))
+            has = gather.user >= 0
+            incident[has] = mesh.corner_incident[gather.user[has]]
+            incident = fill_duplicate_colours(scene, incident)
+        elif settings.corners == "gather":
+            incident = fill_duplicate_colours(
+                scene, gathered_incident(side.scene, sol.node_radiance, gather))
+        timings["colours"] = time.perf_counter() - t0
+        memory.mark("colours")
     monitor.update(1.0, "done")
     timings["total"] = time.perf_counter() - t_start
 

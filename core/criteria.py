@@ -46,9 +46,11 @@ CONTACT_ELEMENT = 5.0
 #: room as modelled made 87, and read 7.5 % too bright there (flipped normals, 2026-11-27).
 LINEAR_RATIO = 2.0
 
-#: Alone points lie within the contacts' tolerance of a contact line; lines are tested against
-#: points in chunks of this many (point, line) pairs.
+#: Alone points lie within the contacts' tolerance of a contact line. Points are tested in
+#: chunks of POINT_CHUNK neighbours, each against the lines near it, PAIR_CHUNK (point, line)
+#: pairs at a time.
 PAIR_CHUNK = 2_000_000
+POINT_CHUNK = 512
 
 #: Solve patches near an emitter are split until their size is at most this many times their
 #: distance to it (and emitter patches likewise towards the surfaces near them): a hemicube
@@ -172,14 +174,26 @@ def contact_points(points, lines, chunk=PAIR_CHUNK):
     a, u, w, length = lines.a[first], lines.u[first], lines.w[first], lines.length[first]
     n = np.cross(u, w)
     tol = lines.tol
-    step = max(1, chunk // a.shape[0])
-    for s in range(0, points.shape[0], step):
-        rel = points[s:s + step, None, :] - a[None]
-        t = np.einsum("pkj,kj->pk", rel, u)
-        on = (np.abs(np.einsum("pkj,kj->pk", rel, w)) <= tol) \
-            & (np.abs(np.einsum("pkj,kj->pk", rel, n)) <= tol) \
-            & (t >= -tol) & (t <= length[None] + tol)
-        out[s:s + step] = on.any(axis=1)
+    # A point within tol of a segment lies within sqrt(3) tol of its bounding box: each chunk
+    # of neighbouring points is tested against the segments whose box, grown by 2 tol, meets
+    # the chunk's box (the same answers as testing every segment).
+    end = a + length[:, None] * u
+    seg_lo, seg_hi = np.minimum(a, end) - 2.0 * tol, np.maximum(a, end) + 2.0 * tol
+    order = spatial_order(points)
+    for s in range(0, points.shape[0], POINT_CHUNK):
+        idx = order[s:s + POINT_CHUNK]
+        pts = points[idx]
+        near = np.flatnonzero(np.all((seg_hi >= pts.min(axis=0)) & (seg_lo <= pts.max(axis=0)),
+                                     axis=1))
+        step = max(1, chunk // idx.size)
+        for k0 in range(0, near.size, step):
+            k = near[k0:k0 + step]
+            rel = pts[:, None, :] - a[None, k]
+            t = np.einsum("pkj,kj->pk", rel, u[k])
+            on = (np.abs(np.einsum("pkj,kj->pk", rel, w[k])) <= tol) \
+                & (np.abs(np.einsum("pkj,kj->pk", rel, n[k])) <= tol) \
+                & (t >= -tol) & (t <= length[None, k] + tol)
+            out[idx] |= on.any(axis=1)
     return out
 
 
@@ -494,15 +508,19 @@ def near_surfaces(patches, *, chunk=CAVITY_CHUNK):
     centres, normals = patches.centres, patches.normals
     radius, _ = patch_extents(patches.corners, centres)
     order = spatial_order(centres)
+    # q's own sphere must reach the box of the chunk's spheres: one large patch (a floor left
+    # whole) does not widen every chunk's reach to its radius.
+    lo_q, hi_q = centres - radius[:, None], centres + radius[:, None]
     for lo in range(0, P, chunk):
         p = order[lo:lo + chunk]
-        reach = radius[p].max() + radius.max()
-        box_lo, box_hi = centres[p].min(axis=0) - reach, centres[p].max(axis=0) + reach
-        q = np.flatnonzero(np.all((centres >= box_lo) & (centres <= box_hi), axis=1))
+        box_lo = (centres[p] - radius[p, None]).min(axis=0)
+        box_hi = (centres[p] + radius[p, None]).max(axis=0)
+        q = np.flatnonzero(np.all((hi_q >= box_lo) & (lo_q <= box_hi), axis=1))
         d = centres[None, q, :] - centres[p, None, :]
-        overlap = np.sqrt(np.einsum("pqk,pqk->pq", d, d)) < radius[p, None] + radius[None, q]
-        plane_p = np.abs(np.einsum("pqk,pk->pq", d, normals[p]))
-        plane_q = np.abs(np.einsum("pqk,qk->pq", d, normals[q]))
-        apart = (plane_p > COPLANAR * radius[p, None]) & (plane_q > COPLANAR * radius[None, q])
-        mask[p] = np.any(overlap & apart, axis=1)
+        a, b = np.nonzero(np.sqrt(np.einsum("pqk,pqk->pq", d, d))
+                          < radius[p, None] + radius[None, q])
+        a, b, d = p[a], q[b], d[a, b]                       # the overlapping pairs alone
+        plane_p = np.abs(np.einsum("ik,ik->i", d, normals[a]))
+        plane_q = np.abs(np.einsum("ik,ik->i", d, normals[b]))
+        mask[a[(plane_p > COPLANAR * radius[a]) & (plane_q > COPLANAR * radius[b])]] = True
     return mask

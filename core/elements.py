@@ -18,11 +18,14 @@ which carry the energy correctly in aggregate. Only the receivers are refined: a
 needed, and each level costs one hemicube per new element.
 """
 
+import collections
+
 import numpy as np
 
 from .criteria import near_surfaces
 from .gather import shade
 from .hemicube import point_rows
+from .parallel import AHEAD
 from .patches import subdivide_patches
 from .refine import lit_mean, refine_mask
 from .rows import RowStore, compact_rows
@@ -195,27 +198,34 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
         todo = [(s, new[masks[s][split_parent[new]]]) for s in (0, 1)]
         total = max(sum(t.size for _, t in todo), 1)
         done = 0
-        for side, ids_side in todo:
-            sign = -1.0 if side else 1.0
-            for b in range(0, ids_side.size, batch):
-                ids = ids_side[b:b + batch]
-                normals = sign * elements.normals[ids]
-                sky = None if direct is None else direct.sky
+        sky = None if direct is None else direct.sky
+        jobs = [(side, t[b:b + batch]) for side, t in todo for b in range(0, t.size, batch)]
+        # Batches start AHEAD of their use (core.parallel.AHEAD); none depends on another's
+        # result: the rows are against the solved patches.
+        started = collections.deque()
+        for k in range(len(jobs) + AHEAD):
+            if k < len(jobs):
+                side, ids = jobs[k]
+                normals = (-1.0 if side else 1.0) * elements.normals[ids]
                 light = None if sky is None else np.zeros((ids.size, 3))
-                rows = point_rows(patches, elements.centres[ids], normals,
-                                  resolution=resolution, rotate=rotate, rng=rng, sky=sky,
-                                  sky_out=light)
-                cols, vals = compact_rows(rows)
-                dl = np.zeros((ids.size, 3)) if direct is None else \
-                    direct.extra(elements.centres[ids], normals, rows.sum(axis=1), sky=light)
-                kept.append((ids, side, cols, vals, dl))
-                seen[side][ids] = shade_side(scene, elements.material[ids],
-                                             np.full(ids.size, bool(side)),
-                                             vals.astype(np.float64) @ L[cols] + dl)
-                done += ids.size
-                if monitor is not None:
-                    monitor.update((level + done / total) / rounds,
-                                   f"elements: level {level + 1}, {parent.size} elements")
+                started.append((side, ids, normals, light, point_rows(
+                    patches, elements.centres[ids], normals, resolution=resolution,
+                    rotate=rotate, rng=rng, sky=sky, sky_out=light, later=True)))
+            if not started or (len(started) <= AHEAD and k < len(jobs)):
+                continue
+            side, ids, normals, light, rows = started.popleft()
+            rows = rows.result()
+            cols, vals = compact_rows(rows)
+            dl = np.zeros((ids.size, 3)) if direct is None else \
+                direct.extra(elements.centres[ids], normals, rows.sum(axis=1), sky=light)
+            kept.append((ids, side, cols, vals, dl))
+            seen[side][ids] = shade_side(scene, elements.material[ids],
+                                         np.full(ids.size, bool(side)),
+                                         vals.astype(np.float64) @ L[cols] + dl)
+            done += ids.size
+            if monitor is not None:
+                monitor.update((level + done / total) / rounds,
+                               f"elements: level {level + 1}, {parent.size} elements")
     # Rows kept in the order of ``computed`` (the store's row keys are positions in it).
     E = parent.size
     computed = np.concatenate([k[0] + k[1] * E for k in kept]) if kept else np.zeros(0, np.int64)

@@ -15,7 +15,7 @@ the adjacent wall is seen from the surface's side instead of exactly edge-on.
 import numpy as np
 
 from .constants import tol
-from .geometry import pairs_by_key, within_crease
+from .geometry import pairs_by_key, sum_at, unique_rows, within_crease
 from .hemicube import point_rows
 from .rows import RowStore
 
@@ -105,24 +105,17 @@ def corner_groups(scene, *, crease_angle=30.0, on_contact=None):
     i, j = i[same], j[same]
     # Smooth normal and inward direction of each corner: area-weighted over its surface's faces.
     # A face counted once per corner it has at the vertex (always one) -- fine.
-    sn = np.zeros((valid_c.size, 3))
-    np.add.at(sn, i, area[j, None] * n[j])
+    m = valid_c.size
+    sn = sum_at(i, area[j, None] * n[j], m)
     sn /= np.linalg.norm(sn, axis=1, keepdims=True)
-    inward = np.zeros((valid_c.size, 3))
-    size = np.zeros(valid_c.size)
-    w = np.zeros(valid_c.size)
-    np.add.at(inward, i, wedge[j])
-    turned = np.zeros(valid_c.size)             # total angle the group's corners cover
-    np.add.at(turned, i, np.linalg.norm(wedge[j], axis=1))
-    np.add.at(size, i, np.sqrt(area[j]))
-    np.add.at(w, i, 1.0)
-    size /= w
+    inward = sum_at(i, wedge[j], m)
+    turned = sum_at(i, np.linalg.norm(wedge[j], axis=1), m)  # the angle the group's corners cover
+    size = sum_at(i, np.sqrt(area[j]), m) / np.bincount(i, minlength=m)
 
     own = np.where(single, np.arange(valid_c.size), -1).astype(np.float64)
     key = np.concatenate([v[:, None].astype(np.float64), mat[:, None].astype(np.float64),
                           np.round(sn, NORMAL_DECIMALS), own[:, None]], axis=1)
-    _, first_of, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    inverse = inverse.reshape(-1)
+    first_of, inverse = unique_rows(key)
     direction = inward[first_of]
     # Remove the normal component (a non-planar face's corner may be tilted off its plane).
     normal = sn[first_of]

@@ -343,3 +343,36 @@ def spatial_order(points):
         for axis in range(3):
             code |= ((q[:, axis] >> bit) & 1) << (3 * bit + axis)
     return np.argsort(code, kind="stable")
+
+
+def sum_at(index, values, n):
+    """``out[index[k]] += values[k]`` into zeros of length ``n`` (values (m,) or (m, d)).
+
+    ``np.add.at``'s sum, in the same order, so bit-identical to it; ``np.bincount`` computes it
+    a column at a time about ten times faster (NumPy 1.26; the colours' corner groups did seven
+    such sums per mesh level over every corner)."""
+    values = np.asarray(values, dtype=np.float64)
+    if values.ndim == 1:
+        return np.bincount(index, weights=values, minlength=n)
+    out = np.empty((n, values.shape[1]))
+    for d in range(values.shape[1]):
+        out[:, d] = np.bincount(index, weights=values[:, d], minlength=n)
+    return out
+
+
+def unique_rows(keys):
+    """(first, inverse) of the distinct rows of ``keys`` (m, d), sorted as ``np.unique(keys,
+    axis=0, return_index=True, return_inverse=True)`` sorts them (lexicographically, the first
+    column first; equal rows by first occurrence), with the same answers: ``np.unique`` with an
+    axis sorts rows as records, several times slower than a lexsort of the columns."""
+    m = keys.shape[0]
+    if m == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    order = np.lexsort(keys.T[::-1])
+    s = keys[order]
+    new = np.empty(m, dtype=bool)
+    new[0] = True
+    np.any(s[1:] != s[:-1], axis=1, out=new[1:])
+    inverse = np.empty(m, dtype=np.int64)
+    inverse[order] = np.cumsum(new) - 1
+    return order[new].astype(np.int64), inverse

@@ -50,6 +50,11 @@ WAIT_STEP = 0.05
 #: hemicube is about 1 ms at R = 64 over a thousand patches; a message under 1 ms).
 MIN_EYES = 8
 
+#: Batches of eyes a caller keeps started and not yet used (core.adaptive's and core.elements'
+#: gathers): this process prepares the next while the workers draw, and a worker that finished
+#: its part of a batch has the next queued. Two, not one: with one, it waited for the other's.
+AHEAD = 2
+
 #: Seconds a starting worker has to import NumPy and this package and say it is ready.
 START_TIMEOUT = 60.0
 
@@ -163,7 +168,7 @@ def submit(sc, eyes, frames, out, sky_out=None):
     """Start the rows of ``eyes`` on the workers; a Deferred that fills ``out`` (and, with a
     sky ``sc.sky``, ``sky_out``) and returns ``out``, or None when this call is not shared (no
     pool in use, too few eyes, no workers): the caller then computes the rows itself. Deferreds
-    must be resolved in the order submitted."""
+    must be resolved in the order submitted. ``out`` must be zero (it is filled sparsely)."""
     context = getattr(_local, "context", None)
     if context is None or eyes.shape[0] < 2 * MIN_EYES:
         return None
@@ -274,6 +279,15 @@ def compute_part(geometry, scalars, eyes, frames):
     with _unshared():
         rows_in_chunks(sc, eyes, frames, out, None, sky_out)
     return out, sky_out, peak_mb(), time.process_time() - tic
+
+
+def hit_columns(rows):
+    """(columns, values): the columns of ``rows`` that hold a nonzero and those columns' values,
+    what a worker sends back. A hemicube sees a few of the polygons, so this is a fraction of
+    the dense rows (the office's gathers: about a tenth), and the bake's process spends its
+    time on reading far fewer bytes; :meth:`Pool.collect` puts them back exactly."""
+    hit = np.flatnonzero(np.any(rows != 0, axis=0))
+    return hit, rows[:, hit]
 
 
 @contextlib.contextmanager
@@ -413,10 +427,11 @@ class Pool:
         """The rows of a submitted ``job`` into ``out`` (returned), its sky light into
         ``sky_out`` (when it has a sky); BakeCancelled when ``cancel`` says so (the workers are
         killed), WorkerError when one fails. Jobs may be collected in any order (a worker
-        answers in the order it was sent the jobs; answers to later jobs wait)."""
+        answers in the order it was sent the jobs; answers to later jobs wait). ``out`` must
+        be zero: the workers send the hit columns alone (:func:`hit_columns`)."""
         bounds = job[1]
-        for k, (rows, sky) in enumerate(self._collect(job, cancel)):
-            out[bounds[k]:bounds[k + 1]] = rows
+        for k, ((hit, values), sky) in enumerate(self._collect(job, cancel)):
+            out[bounds[k]:bounds[k + 1], hit] = values
             if sky_out is not None:
                 sky_out[bounds[k]:bounds[k + 1]] = sky
         return out
@@ -502,7 +517,7 @@ def serve():
                 continue
             _, ident, token, scalars, eyes, frames = message
             out, sky_out, peak, cpu = compute_part(kept[token], scalars, eyes, frames)
-            _send(sink, ("rows", out, peak, cpu, sky_out, ident))
+            _send(sink, ("rows", hit_columns(out), peak, cpu, sky_out, ident))
         except Exception:                          # noqa: BLE001 - reported to the parent
             _send(sink, ("error", traceback.format_exc()))
 

@@ -9,11 +9,13 @@ import pytest
 
 from core import BakeSettings, scene_from_polygons
 from core.adaptive import MIN_ELEMENT
-from core.criteria import (STEEP_FLOOR, cavity_mask, interpolation_errors, per_leaf_scores,
-                           smallest_split)
+from core.criteria import (COPLANAR, STEEP_FLOOR, _Lines, cavity_mask, contact_points,
+                           interpolation_errors, near_surfaces, per_leaf_scores, smallest_split)
 from core.geometry import patch_extents
 from core.hierarchy import ElementTree
 from core.patches import make_patches
+
+from builders import box_quads, quad_patches
 
 SIZE = 4.0
 
@@ -172,3 +174,67 @@ def test_a_thin_cavity_splits_both_sides_down_to_its_gap():
     assert not cavity_mask(make_patches(board_over_floor(0.0, 0.5), 1.0)).any()
     # Never below min_size.
     assert not cavity_mask(patches, min_size=2.0).any()
+
+
+def _boxes_and_a_slab(seed):
+    """A room of 0.5 m quads, boxes in it at random, and a 40 m site plane in the floor's
+    plane: its bounding sphere reaches every patch (the floor's patches stay not near it)."""
+    rng = np.random.default_rng(seed)
+    walls, _ = box_quads((4.0, 3.0, 2.5), 0.5)
+    parts = [walls]
+    for _ in range(4):
+        block, _ = box_quads(tuple(rng.uniform(0.3, 1.2, 3)), 0.25)
+        parts.append(block[:, ::-1] + rng.uniform([0.0, 0.0, 0.0], [3.0, 2.0, 1.0]))
+    slab = np.array([[[-18.0, -18.0, 0.0], [22.0, -18.0, 0.0], [22.0, 21.0, 0.0],
+                      [-18.0, 21.0, 0.0]]])
+    return quad_patches(np.concatenate(parts + [slab]))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_near_surfaces_is_its_definition_over_every_pair(seed):
+    """Oracle: the docstring's rule over all pairs, one pair at a time (the function prunes
+    pairs by their spheres' boxes; it must not drop one that qualifies)."""
+    patches = _boxes_and_a_slab(seed)
+    radius, _ = patch_extents(patches.corners, patches.centres)
+    c, n = patches.centres, patches.normals
+    want = np.zeros(c.shape[0], dtype=bool)
+    for p in range(c.shape[0]):
+        d = c - c[p]
+        overlap = np.sqrt(np.sum(d * d, axis=1)) < radius[p] + radius
+        apart = (np.abs(d @ n[p]) > COPLANAR * radius[p]) \
+            & (np.abs(np.sum(d * n, axis=1)) > COPLANAR * radius)
+        want[p] = np.any(overlap & apart)
+    got = near_surfaces(patches, chunk=64)
+    assert want.any() and not want.all()
+    assert np.array_equal(got, want)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_contact_points_is_its_definition_over_every_pair(seed):
+    """Oracle: each point against each segment, one at a time (the function tests chunks of
+    neighbouring points against the segments whose boxes meet theirs)."""
+    rng = np.random.default_rng(seed)
+    k = 60
+    a = rng.uniform(-5.0, 5.0, (k, 3))
+    u = rng.normal(size=(k, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    w = np.cross(u, rng.normal(size=(k, 3)))
+    w /= np.linalg.norm(w, axis=1, keepdims=True)
+    length = rng.uniform(0.01, 6.0, k)
+    tol = 0.05
+    lines = _Lines(a, u, w, length, tol)
+    # Points on, beside and beyond the segments (about half of them within tol), and at random.
+    pick = rng.integers(0, k, 3000)
+    t = rng.uniform(-0.2, 1.2, pick.size) * length[pick]
+    off = rng.normal(scale=tol, size=(pick.size, 3))
+    points = np.concatenate([a[pick] + t[:, None] * u[pick] + off,
+                             rng.uniform(-6.0, 6.0, (500, 3))])
+    nrm = np.cross(u, w)
+    want = np.zeros(points.shape[0], dtype=bool)
+    for j in range(k):
+        rel = points - a[j]
+        s = rel @ u[j]
+        want |= (np.abs(rel @ w[j]) <= tol) & (np.abs(rel @ nrm[j]) <= tol) \
+            & (s >= -tol) & (s <= length[j] + tol)
+    assert 0.1 < want.mean() < 0.9
+    assert np.array_equal(contact_points(points, lines, chunk=5000), want)

@@ -5,7 +5,7 @@ import pytest
 
 from core.geometry import (corner_turns, newell_normals_areas, newell_vectors, plane_basis,
                            quads_convex, split_concave_quads, triangulate_polygon)
-from core.geometry import pairs_by_key
+from core.geometry import pairs_by_key, sum_at, unique_rows
 
 #: Float64 rounding of sums of a few cross products of O(1) coordinates.
 TIGHT = 1e-12
@@ -192,3 +192,32 @@ def test_pairs_by_key_lists_every_ordered_pair_within_each_group():
     assert e_i.size == 0 and e_j.size == 0
     with pytest.raises(ValueError, match=r"keys must have shape \(n,\); got \(2, 2\)"):
         pairs_by_key(np.zeros((2, 2)))
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_sum_at_is_add_at_bit_for_bit(seed):
+    """Oracle: np.add.at (the same sums, in the same order: equal bits, not within a tolerance)."""
+    rng = np.random.default_rng(seed)
+    m, n = int(rng.integers(0, 2000)), 37
+    index = rng.integers(0, n, m)
+    values = rng.normal(size=(m, 3)) * 10.0 ** rng.integers(-8, 8, (m, 1))
+    want = np.zeros((n, 3))
+    np.add.at(want, index, values)
+    assert np.array_equal(sum_at(index, values, n), want)
+    want1 = np.zeros(n)
+    np.add.at(want1, index, values[:, 0])
+    assert np.array_equal(sum_at(index, values[:, 0], n), want1)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_unique_rows_answers_as_np_unique_with_an_axis(seed):
+    """Oracle: np.unique(axis=0)'s first occurrences and inverse, with ties, repeated rows and
+    signed zeros (-0.0 and 0.0 are one value to both)."""
+    rng = np.random.default_rng(seed)
+    keys = rng.integers(-2, 3, (int(rng.integers(1, 3000)), 6)).astype(np.float64)
+    keys[rng.random(keys.shape) < 0.2] = -0.0
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    got_first, got_inverse = unique_rows(keys)
+    assert np.array_equal(got_first, first)
+    assert np.array_equal(got_inverse, inverse.reshape(-1))
+    assert unique_rows(np.zeros((0, 4)))[0].size == 0

@@ -259,3 +259,18 @@ def test_a_bake_with_point_lights_shares_its_shadow_rays_and_keeps_its_bits(monk
     two = bake(suite(2), BakeSettings(workers=2, **settings))
     assert sum(shared) >= 3                   # lights, exact emitters, shadow-edge tests
     assert all(np.array_equal(a, b) for a, b in zip(_outputs(one), _outputs(two)))
+
+
+def test_workers_send_the_hit_columns_and_the_rows_come_back_exactly(room_patches):
+    """A worker sends only the columns its rows hit (core.parallel.hit_columns); the rows put
+    back into zeros are the dense rows (oracle: the rows computed in this process)."""
+    pts, nrm = _floor_points(40, seed=3)
+    want = point_rows(room_patches, pts, nrm, resolution=16)
+    hit, values = parallel.hit_columns(want)
+    assert 0 < hit.size < want.shape[1]
+    back = np.zeros_like(want)
+    back[:, hit] = values
+    assert np.array_equal(back, want)
+    with parallel.using(2):
+        shared = point_rows(room_patches, pts, nrm, resolution=16)
+    assert np.array_equal(shared, want)
