@@ -5,7 +5,7 @@ for a while after it. During the form factors and the gathers, the worker proces
 (:mod:`core.parallel`) already fill the cores, and every product this process makes there (a
 gather batch's rows times the radiance, several per batch) woke threads that took the workers'
 cores: the office sample with 2 workers spent 19.0 s of CPU in this process against 10.7 s with
-one BLAS thread, and baked in 61.8 s against 57.1 s. Those stages run with one thread whether the
+``OPENBLAS_NUM_THREADS=1``, and baked in 61.8 s against 57.1 s (2026-11-29). Those stages run with one thread whether the
 bake uses workers or not, so their results are the same with any number of workers (OpenBLAS's
 sums depend on its thread count). The solve keeps its threads: nothing else runs then.
 
