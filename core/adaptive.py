@@ -29,7 +29,6 @@ A point none of whose adjacent patches receives any light is not gathered (its r
 emission): surfaces no light reaches cost no hemicube.
 """
 
-import collections
 import dataclasses
 import time
 
@@ -44,7 +43,7 @@ from .farfield import FarField, Seen, compact_with_sums, seen_subset
 from .geometry import spatial_order, unique_rows
 from .hemicube import point_rows
 from .hierarchy import ElementTree, output_mesh
-from .parallel import AHEAD, Deferred
+from .parallel import Deferred, ahead
 from .progress import SubMonitor
 from .rows import RowStore
 from .scene import make_scene
@@ -372,46 +371,39 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         vis = np.zeros(new.size, dtype=np.int64)
         batches = []
         pos_in_new = np.searchsorted(new, go)
-        # Each batch's hemicubes start (on the worker processes, if the bake uses them) while
-        # the AHEAD batches before it are still to be used, so this process prepares batches
-        # meanwhile and a worker that finishes its part early has the next one queued;
-        # batches are used in order, so nothing depends on the timing.
-        started = collections.deque()
-        for s in range(0, go.size + AHEAD * GATHER_BATCH, GATHER_BATCH):
-            ahead = None
-            light = None
-            if s < go.size:
-                g = go[s:s + GATHER_BATCH]
-                kw = dict(resolution=settings.resolution, rotate=settings.rotate_hemicube,
-                          rng=rng, later=True)
-                if sky is not None:         # filled when the batch's rows are
-                    light = np.zeros((g.size, 3))
-                    kw.update(sky=sky, sky_out=light)
-                if not seen.areas.size:  # nothing lit to see (exact emitters light a black room)
-                    ahead = Deferred(lambda n=g.size: (np.zeros(0, dtype=np.int64),
-                                                       np.zeros((n, 0), dtype=np.float32),
-                                                       np.zeros(n)))
-                elif far_field is None:
-                    ahead = point_rows(seen, groups.points[g], groups.normals[g],
-                                       **kw).then(compact_with_sums)
-                else:
-                    ahead = far_field.rows(groups.points[g], groups.normals[g], compact=True,
-                                           **kw)
-            if len(started) == AHEAD or (started and ahead is None):
-                s0, job, done_light = started.popleft()
-                cols, vals, sums = job.result()
-                at = pos_in_new[s0:s0 + GATHER_BATCH]
-                inc[at] = vals.astype(np.float64) @ seen_L[cols]
-                covered[at] = sums
-                if sky is not None:
-                    sky_in[at] = done_light
-                batches.append((at, cols, vals))
-                if gather_monitor is not None:
-                    done = (s0 + vals.shape[0]) / go.size  # level k: [1 - 2^-k, 1 - 2^-(k+1)]
-                    gather_monitor.update(1.0 - 0.5 ** level * (1.0 - 0.5 * done),
-                                          f"mesh: level {level}, {tree.points.shape[0]} points")
-            if ahead is not None:
-                started.append((s, ahead, light))
+        kw = dict(resolution=settings.resolution, rotate=settings.rotate_hemicube, rng=rng,
+                  later=True)
+
+        def begin(s):
+            """The rows of batch ``s`` started (on the worker processes, if the bake uses
+            them), and the array its sky light fills when they are ready."""
+            g = go[s:s + GATHER_BATCH]
+            light = None if sky is None else np.zeros((g.size, 3))
+            extra = {} if sky is None else dict(sky=sky, sky_out=light)
+            if not seen.areas.size:    # nothing lit to see (exact emitters light a black room)
+                return Deferred(lambda n=g.size: (np.zeros(0, dtype=np.int64),
+                                                  np.zeros((n, 0), dtype=np.float32),
+                                                  np.zeros(n))), light
+            if far_field is None:
+                return point_rows(seen, groups.points[g], groups.normals[g], **kw,
+                                  **extra).then(compact_with_sums), light
+            return far_field.rows(groups.points[g], groups.normals[g], compact=True, **kw,
+                                  **extra), light
+
+        # Batches start ahead of their use (core.parallel.ahead): this process finishes one
+        # while the workers draw the next; used in order, so nothing depends on the timing.
+        for s0, (job, light) in ahead(range(0, go.size, GATHER_BATCH), begin):
+            cols, vals, sums = job.result()
+            at = pos_in_new[s0:s0 + GATHER_BATCH]
+            inc[at] = vals.astype(np.float64) @ seen_L[cols]
+            covered[at] = sums
+            if sky is not None:
+                sky_in[at] = light
+            batches.append((at, cols, vals))
+            if gather_monitor is not None:
+                done = (s0 + vals.shape[0]) / go.size      # level k: [1 - 2^-k, 1 - 2^-(k+1)]
+                gather_monitor.update(1.0 - 0.5 ** level * (1.0 - 0.5 * done),
+                                      f"mesh: level {level}, {tree.points.shape[0]} points")
         if go.size:
             vis[pos_in_new] = emitters.visibility(groups.points[go], groups.normals[go])
             if direct is not None:

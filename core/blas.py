@@ -5,9 +5,10 @@ for a while after it. During the form factors and the gathers, the worker proces
 (:mod:`core.parallel`) already fill the cores, and every product this process makes there (a
 gather batch's rows times the radiance, several per batch) woke threads that took the workers'
 cores: the office sample with 2 workers spent 19.0 s of CPU in this process against 10.7 s with
-``OPENBLAS_NUM_THREADS=1``, and baked in 61.8 s against 57.1 s (2026-11-29). Those stages run with one thread whether the
-bake uses workers or not, so their results are the same with any number of workers (OpenBLAS's
-sums depend on its thread count). The solve keeps its threads: nothing else runs then.
+``OPENBLAS_NUM_THREADS=1``, and baked in 61.8 s against 57.1 s (2026-11-29). Those stages run
+with one thread whether the bake uses workers or not, so their results are the same with any
+number of workers (OpenBLAS's sums depend on its thread count). The solve keeps its threads:
+nothing else runs then.
 
 OpenBLAS is found among the libraries the process has loaded (``/proc/self/maps``) or beside
 NumPy (its wheels' ``numpy.libs``, ``.libs``, ``.dylibs``), and called through ctypes under the
@@ -40,7 +41,8 @@ def _candidates():
     try:
         with open("/proc/self/maps", encoding="utf-8", errors="replace") as maps:
             for line in maps:
-                path = line.split()[-1] if len(line.split()) >= 6 else ""
+                fields = line.split()
+                path = fields[-1] if len(fields) >= 6 else ""
                 if "openblas" in path.lower() and ".so" in path:    # or openblas-*/libblas
                     paths.append(path)
     except OSError:

@@ -18,14 +18,12 @@ which carry the energy correctly in aggregate. Only the receivers are refined: a
 needed, and each level costs one hemicube per new element.
 """
 
-import collections
-
 import numpy as np
 
 from .criteria import near_surfaces
 from .gather import shade
 from .hemicube import point_rows
-from .parallel import AHEAD
+from .parallel import ahead
 from .patches import subdivide_patches
 from .refine import lit_mean, refine_mask
 from .rows import RowStore, compact_rows
@@ -200,20 +198,18 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
         done = 0
         sky = None if direct is None else direct.sky
         jobs = [(side, t[b:b + batch]) for side, t in todo for b in range(0, t.size, batch)]
-        # Batches start AHEAD of their use (core.parallel.AHEAD); none depends on another's
+
+        def begin(job):
+            side, ids = job
+            normals = (-1.0 if side else 1.0) * elements.normals[ids]
+            light = None if sky is None else np.zeros((ids.size, 3))
+            rows = point_rows(patches, elements.centres[ids], normals, resolution=resolution,
+                              rotate=rotate, rng=rng, sky=sky, sky_out=light, later=True)
+            return normals, light, rows
+
+        # Batches start ahead of their use (core.parallel.ahead); none depends on another's
         # result: the rows are against the solved patches.
-        started = collections.deque()
-        for k in range(len(jobs) + AHEAD):
-            if k < len(jobs):
-                side, ids = jobs[k]
-                normals = (-1.0 if side else 1.0) * elements.normals[ids]
-                light = None if sky is None else np.zeros((ids.size, 3))
-                started.append((side, ids, normals, light, point_rows(
-                    patches, elements.centres[ids], normals, resolution=resolution,
-                    rotate=rotate, rng=rng, sky=sky, sky_out=light, later=True)))
-            if not started or (len(started) <= AHEAD and k < len(jobs)):
-                continue
-            side, ids, normals, light, rows = started.popleft()
+        for (side, ids), (normals, light, rows) in ahead(jobs, begin):
             rows = rows.result()
             cols, vals = compact_rows(rows)
             dl = np.zeros((ids.size, 3)) if direct is None else \

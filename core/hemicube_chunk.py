@@ -15,6 +15,7 @@ import time
 import numpy as np
 
 from .constants import tol
+from .geometry import unique_rows
 from .hemicube_delta import flat_delta_form_factors
 from .hemicube_raster import F32, FRAG_SLOTS, LITTLE_ENDIAN, ZBuffer, draw_items, pixel_coords
 from .parallel import share
@@ -38,7 +39,8 @@ class Geometry:
         self.diag = float(np.linalg.norm(hi - lo)) or 1.0
         # Shared corners are transformed once per source, so every polygon sees bit-identical
         # eye-frame coordinates of a shared vertex (no cracks along shared edges).
-        self.verts, inverse = _distinct_rows(flat)
+        first, inverse = unique_rows(flat)
+        self.verts = flat[first]
         self.poly_v = inverse.reshape(-1, 4)                              # (Q, 4)
         # Planes oriented along the patch normal: eye above the plane = front-facing.
         n = np.cross(polys[:, 1] - polys[:, 0], polys[:, 2] - polys[:, 0]) \
@@ -62,18 +64,6 @@ class Geometry:
         g.diag = float(np.linalg.norm(g.verts.max(axis=0) - g.verts.min(axis=0))) or 1.0
         g.plane_n, g.plane_c = self.plane_n[sel], self.plane_c[sel]
         return g
-
-
-def _distinct_rows(flat):
-    """``np.unique(flat, axis=0, return_inverse=True)`` for (N, 3) floats, three times as fast
-    (a lexsort of the columns instead of a sort of the rows as records)."""
-    order = np.lexsort((flat[:, 2], flat[:, 1], flat[:, 0]))
-    ordered = flat[order]
-    first = np.ones(ordered.shape[0], dtype=bool)
-    first[1:] = np.any(ordered[1:] != ordered[:-1], axis=1)
-    inverse = np.empty(ordered.shape[0], dtype=np.int64)
-    inverse[order] = np.cumsum(first) - 1
-    return ordered[first], inverse
 
 
 class Scene:

@@ -164,6 +164,20 @@ class Deferred:
         return Deferred(lambda: f(self.result()))
 
 
+def ahead(items, start, depth=AHEAD):
+    """(item, start(item)) for each of ``items``, in order, each yielded once the ``depth``
+    items after it are started too: the caller uses one batch while the workers draw the next
+    ``depth``. Items are started in order (their random rotations drawn in order), so the result
+    does not depend on the timing."""
+    started = collections.deque()
+    for item in items:
+        started.append((item, start(item)))
+        if len(started) > depth:
+            yield started.popleft()
+    while started:
+        yield started.popleft()
+
+
 def submit(sc, eyes, frames, out, sky_out=None):
     """Start the rows of ``eyes`` on the workers; a Deferred that fills ``out`` (and, with a
     sky ``sc.sky``, ``sky_out``) and returns ``out``, or None when this call is not shared (no
