@@ -349,8 +349,8 @@ def sum_at(index, values, n):
     """``out[index[k]] += values[k]`` into zeros of length ``n`` (values (m,) or (m, d)).
 
     ``np.add.at``'s sum, in the same order, so bit-identical to it; ``np.bincount`` computes it
-    a column at a time about ten times faster (NumPy 1.26; the colours' corner groups did seven
-    such sums per mesh level over every corner)."""
+    a column at a time, 3x faster (NumPy 1.26, 300,000 rows of 3 into 100,000; the colours'
+    corner groups did seven such sums per mesh level over every corner)."""
     values = np.asarray(values, dtype=np.float64)
     if values.ndim == 1:
         return np.bincount(index, weights=values, minlength=n)
