@@ -173,6 +173,30 @@ def test_tree_is_balanced_and_leaves_cover_every_triangle():
         assert np.all(members.max(axis=(0, 1)) <= bvh.hi[node])
 
 
+
+def test_stored_rows_are_the_triangles_and_boxes_and_travel_as_fields():
+    """The tree keeps one row per coordinate (what the traversal reads); its views in rows of
+    points are the triangles themselves, and a tree rebuilt from its fields (as a worker process
+    receives it, core.parallel) answers every ray the same."""
+    rng = np.random.default_rng(3)
+    tris = random_scene(rng, 300)
+    bvh = build_bvh(tris)
+    assert bvh.planes.flags.c_contiguous and bvh.corners.flags.c_contiguous
+    sorted_tris = tris[bvh.order]
+    np.testing.assert_array_equal(bvh.v0, sorted_tris[:, 0])
+    np.testing.assert_array_equal(bvh.e1, sorted_tris[:, 1] - sorted_tris[:, 0])
+    np.testing.assert_array_equal(bvh.e2, sorted_tris[:, 2] - sorted_tris[:, 0])
+    np.testing.assert_array_equal(bvh.boxes[:, 0], bvh.lo)
+    np.testing.assert_array_equal(bvh.boxes[:, 1], bvh.hi)
+    assert np.all(bvh.lo[0] <= tris.min(axis=(0, 1))) and np.all(bvh.hi[0] >= tris.max(axis=(0, 1)))
+    copy = BVH(**{k: np.array(v) if isinstance(v, np.ndarray) else v
+                  for k, v in vars(bvh).items()})
+    o = rng.uniform(-1.5, 1.5, (2000, 3))
+    d = rng.normal(size=(2000, 3))
+    for a, b in zip(closest_hit(bvh, o, d), closest_hit(copy, o, d)):
+        np.testing.assert_array_equal(a, b)
+    assert (closest_hit(bvh, o, d)[1] >= 0).mean() > 0.05
+
 @pytest.fixture
 def small_bvh():
     return build_bvh(np.array([[[0, 0, 1], [1, 0, 1], [0, 1, 1]]], float))
