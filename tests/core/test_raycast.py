@@ -173,7 +173,6 @@ def test_tree_is_balanced_and_leaves_cover_every_triangle():
         assert np.all(members.max(axis=(0, 1)) <= bvh.hi[node])
 
 
-
 def test_stored_rows_are_the_triangles_and_boxes_and_travel_as_fields():
     """The tree keeps one row per coordinate (what the traversal reads); its views in rows of
     points are the triangles themselves, and a tree rebuilt from its fields (as a worker process
@@ -196,6 +195,7 @@ def test_stored_rows_are_the_triangles_and_boxes_and_travel_as_fields():
     for a, b in zip(closest_hit(bvh, o, d), closest_hit(copy, o, d)):
         np.testing.assert_array_equal(a, b)
     assert (closest_hit(bvh, o, d)[1] >= 0).mean() > 0.05
+
 
 @pytest.fixture
 def small_bvh():
