@@ -53,8 +53,8 @@ class BVH:
     """Bounding-volume hierarchy over triangles (build it with :func:`build_bvh`).
 
     Boxes and triangles are stored as the traversal reads them, one contiguous row per coordinate
-    (see the module docstring); ``boxes``, ``lo``, ``hi``, ``v0``, ``e1`` and ``e2`` are views
-    of them in rows of points.
+    (see the module docstring); ``lo``, ``hi``, ``v0``, ``e1`` and ``e2`` are views of them in
+    rows of points, ``boxes`` a copy.
 
     Attributes
     ----------
@@ -85,7 +85,7 @@ class BVH:
 
     @property
     def boxes(self):
-        """(n_nodes, 2, 3): ``boxes[:, 0]`` low corner, ``boxes[:, 1]`` high corner (a view)."""
+        """(n_nodes, 2, 3): ``boxes[:, 0]`` low corner, ``boxes[:, 1]`` high corner (a copy)."""
         return self.planes.T.reshape(-1, 2, 3)
 
     @property
@@ -271,29 +271,18 @@ def _check_rays(bvh, origins, directions, t_max):
 def _slab(box, o, inv, limit):
     """Slab test of paired boxes and rays: (M,) bool.
 
-    ``box`` (6, M) holds each box's low then high x, y, z, one contiguous row per coordinate
-    (each step a pass over contiguous 1-D arrays); ``o`` and ``inv`` (3, M) the rays' origins
-    and inverse directions, likewise. fmin/fmax drop the NaN of 0 * inf
-    (origin on a slab plane of an axis the ray is parallel to), which keeps the test
-    conservative.
+    ``box`` (6, M) holds each box's low then high x, y, z, one contiguous row per coordinate;
+    ``o`` and ``inv`` (3, M) the rays' origins and inverse directions, likewise. fmin/fmax drop
+    the NaN of 0 * inf (origin on a slab plane of an axis the ray is parallel to), which keeps
+    the test conservative.
     """
     with np.errstate(invalid="ignore"):
-        a = np.subtract(box[0], o[0])
-        a *= inv[0]
-        b = np.subtract(box[3], o[0])
-        b *= inv[0]
+        a, b = (box[0] - o[0]) * inv[0], (box[3] - o[0]) * inv[0]
         tn, tf = np.fmin(a, b), np.fmax(a, b)
         for k in (1, 2):
-            np.subtract(box[k], o[k], out=a)
-            a *= inv[k]
-            np.subtract(box[k + 3], o[k], out=b)
-            b *= inv[k]
-            c = np.fmin(a, b)
-            np.fmax(tn, c, out=tn)
-            np.fmax(a, b, out=c)
-            np.fmin(tf, c, out=tf)
-        np.maximum(tn, 0.0, out=a)
-    return (tf >= a) & (tn <= limit)
+            a, b = (box[k] - o[k]) * inv[k], (box[k + 3] - o[k]) * inv[k]
+            tn, tf = np.fmax(tn, np.fmin(a, b)), np.fmin(tf, np.fmax(a, b))
+    return (tf >= np.maximum(tn, 0.0)) & (tn <= limit)
 
 
 def _traverse(bvh, o, d, dn, t_max, any_mode):
