@@ -323,11 +323,16 @@ class Emitters:
             kk, pp, gap = self._near_pairs(q, centres, radius, e_centre, e_radius, receives)
             if kk.size == 0:
                 continue
+            hit = np.unique(pp)
+            normal = self.sign[e] * self._normal[q]
+            # A receiver wholly behind the emitting side (the ceiling over a downlight) reads 0
+            # from every point of it: kept, not integrated.
+            ahead = (corners[pp] @ normal).max(axis=1) > (self._corners[kk] @ normal).min(axis=1)
+            kk, pp, gap = kk[ahead], pp[ahead], gap[ahead]
             with np.errstate(divide="ignore"):
                 cells = np.ceil(2.0 * e_radius[kk] / gap)
             cells = np.clip(np.nan_to_num(cells, nan=hi, posinf=hi), lo, hi).astype(np.int64)
             acc = np.zeros((P, 2))
-            normal = self.sign[e] * self._normal[q]
             for n in np.unique(cells):
                 rows = np.flatnonzero(cells == n)
                 i, j = np.divmod(np.arange(n * n), n)
@@ -346,7 +351,6 @@ class Emitters:
                         * (jac * w[None]).reshape(-1)
                     back = np.einsum("ij,ij->i", y - centres[p], patches.normals[p]) < 0
                     np.add.at(acc, (p, back.astype(np.int64)), f)
-            hit = np.unique(pp)
             mean = np.pi * acc[hit] / np.asarray(patches.areas, dtype=np.float64)[hit, None]
             if not two_sided:
                 mean[:, 1] = 0.0
