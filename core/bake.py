@@ -23,6 +23,7 @@ import numpy as np
 from .adaptive import coarse_patch_size, mesh_colours, min_element_size
 from .colours import corner_colours
 from .contacts import find_contacts, split_at_contacts
+from .covered import Covers
 from .criteria import cavity_mask, face_variation, near_emitter_mask, unlit_late_nodes
 from .emitters import Emitters, exact_materials
 from .footlines import foot_lines, shadow_lines
@@ -427,7 +428,8 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
             emitters = Emitters(scene, patches, chosen)
         if scene.lights is not None or scene.world is not None or emitters is not None:
             direct = DirectLight(scene.lights, patches, settings.light_samples, scene.world,
-                                 min_size=settings.min_element, emitters=emitters)
+                                 min_size=settings.min_element, emitters=emitters,
+                                 covers=Covers(scene))
     nodes = node_arrays(scene, patches, settings.two_sided, direct)
     if direct is not None:
         timings["lights"] = time.perf_counter() - t0

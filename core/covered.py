@@ -22,6 +22,11 @@ the box's bottom lie at one depth and rounding picks which one a pixel sees. The
 reaches the floor there is absorbed, so the energy balance holds either way; the box's inside
 reads a little darker (no one sees it).
 
+A patch only partly under a cover (one the contact cuts left overhanging the outline by a
+sliver, or any patch with the cuts off) is not black; its points under the cover get no direct
+light instead (:class:`Covers`, used by :class:`core.lights.DirectLight` at the patches' Gauss
+points).
+
 Faces that are near-duplicates of each other (a flipped copy of a floor over it,
 :func:`core.duplicates.near_duplicate_warning`) are not covers: which of the two shows the light
 is the user's model, and both keep it. Emitting fronts are never covered (a lamp face down on a
@@ -82,8 +87,7 @@ def covered_fronts(scene, patches, *, tol=None):
     pi, gi = pi[ok], gi[ok]
     if pi.size == 0:
         return out
-    root = find_duplicates(scene, rtol=NEAR_DUPLICATE_RTOL)
-    root = np.where(root >= 0, root, np.arange(root.size))
+    root = _roots(scene)
     keep = root[patches.face[pi]] != root[gi]
     pi, gi = pi[keep], gi[keep]
     # Covered only if the whole patch is: its centre and its corners drawn in towards it by
@@ -97,10 +101,18 @@ def covered_fronts(scene, patches, *, tol=None):
     return out
 
 
-def _inside(points, polys, normals):
+def _roots(scene):
+    """(F,) int64: each face's root among its near-duplicates (:func:`core.duplicates.
+    find_duplicates`), itself if it has none."""
+    root = find_duplicates(scene, rtol=NEAR_DUPLICATE_RTOL)
+    return np.where(root >= 0, root, np.arange(root.size))
+
+
+def _inside(points, polys, normals, margin=0.0):
     """(K,) bool: ``points`` (K, 3) inside the planar polygons ``polys`` (K, n, 3) of unit
     ``normals``, projected on the polygon's plane (crossing number; a padded polygon's
-    repeated corners add zero-length edges, which cross nothing)."""
+    repeated corners add zero-length edges, which cross nothing), and farther than ``margin``
+    from every edge."""
     u, v = unit_frames(normals)
     rel = polys - points[:, None, :]
     x, y = np.einsum("knj,kj->kn", rel, u), np.einsum("knj,kj->kn", rel, v)
@@ -109,4 +121,89 @@ def _inside(points, polys, normals):
     with np.errstate(divide="ignore", invalid="ignore"):
         at = x + (0.0 - y) * (x1 - x) / (y1 - y)
     crossings = (straddles & (at > 0)).sum(axis=1)
-    return crossings % 2 == 1
+    inside = crossings % 2 == 1
+    if margin > 0.0:
+        dx, dy = x1 - x, y1 - y
+        length2 = dx * dx + dy * dy
+        t = np.clip(-(x * dx + y * dy) / np.where(length2 > 0, length2, 1.0), 0.0, 1.0)
+        near = ((x + t * dx) ** 2 + (y + t * dy) ** 2).min(axis=1) <= margin * margin
+        inside &= ~near
+    return inside
+
+
+class Covers:
+    """Faces lying face to face on another face (a box's bottom and the floor under it), to
+    find the points they cover (:meth:`points`).
+
+    :func:`covered_fronts` blacks out a patch only if the whole of it is covered. A patch that
+    overhangs its cover by a sliver, which the contact cuts leave uncut (``MIN_PIECE``), or any
+    patch with ``contact_cuts`` off, has points under the cover and points beside it: the points
+    under it are lifted into the box by the shadow rays' offset, where an emitting box top's
+    inner side lit them (the floor under a glowing box read 1 % of the box's power,
+    tests/core/test_fuzz.py). The direct light treats each such point as covered: no light at
+    all, whatever the rays say.
+
+    Parameters
+    ----------
+    scene : core.scene.Scene
+    tol : float, optional
+        Contact distance in metres (default ``tol.contact`` x the bounding diagonal, as
+        :func:`covered_fronts`); a point must also lie this far inside a cover's outline (on
+        the outline, at a box's foot, it is lit from outside).
+    """
+
+    def __init__(self, scene, *, tol=None):
+        diag = scene.bounding_diagonal()
+        self.tol = float(constants.tol.contact * diag if tol is None else tol)
+        valid = np.flatnonzero(scene.face_valid)
+        polys = padded_polygons(scene.vertices, scene.corner_verts, scene.face_starts,
+                                scene.face_sizes)[valid]
+        normals = np.asarray(scene.face_normals, dtype=np.float64)[valid]
+        first = polys[:, 0]
+        lo, hi = polys.min(axis=1) - self.tol, polys.max(axis=1) + self.tol
+        size = np.sqrt(np.asarray(scene.face_areas, dtype=np.float64)[valid])
+        self.cell = max(float(np.median(size)) if size.size else 0.0, diag / GRID_CELLS,
+                        self.tol, np.finfo(float).tiny)
+        a, b = _box_pairs(lo, hi, lo, hi, self.cell)
+        ok = (a < b) & (np.einsum("ij,ij->i", normals[a], normals[b])
+                        <= -constants.tol.parallel_cos)
+        a, b = a[ok], b[ok]
+        ok = np.abs(np.einsum("ikj,ij->ik", polys[b] - first[a][:, None], normals[a])).max(
+            axis=1) <= self.tol
+        a, b = a[ok], b[ok]
+        #: (F,) int64: each face's root among its near-duplicates (itself if it has none).
+        self.root = np.arange(scene.face_areas.size)
+        if a.size:
+            # A flipped copy of a face is not its cover (core.duplicates; as covered_fronts).
+            self.root = _roots(scene)
+            keep = self.root[valid[a]] != self.root[valid[b]]
+            a, b = a[keep], b[keep]
+        mine = np.unique(np.concatenate([a, b]))
+        self.polys, self.normals, self.first = polys[mine], normals[mine], first[mine]
+        self.face = valid[mine]
+        self.lo, self.hi = lo[mine], hi[mine]
+
+    def __len__(self):
+        return self.polys.shape[0]
+
+    def points(self, points, normals, faces):
+        """(n,) bool: ``points`` (n, 3) of scene faces ``faces`` (n,) facing ``normals`` (n, 3)
+        that lie in another face's plane (within ``tol``), face it, and lie inside its outline
+        by more than ``tol``. (The face a point belongs to is needed: the floor under a box and
+        the box bottom's inner side are the same points facing the same way; a face's flipped
+        copy does not cover it either.)"""
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        out = np.zeros(points.shape[0], dtype=bool)
+        if not len(self) or points.shape[0] == 0:
+            return out
+        normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+        pi, ci = _box_pairs(points, points, self.lo, self.hi, self.cell)
+        ok = self.root[np.asarray(faces)[pi]] != self.root[self.face[ci]]
+        ok &= np.einsum("ij,ij->i", normals[pi], self.normals[ci]) <= -constants.tol.parallel_cos
+        ok &= np.abs(np.einsum("ij,ij->i", points[pi] - self.first[ci], self.normals[ci])) \
+            <= self.tol
+        pi, ci = pi[ok], ci[ok]
+        if pi.size:
+            hit = _inside(points[pi], self.polys[ci], self.normals[ci], margin=self.tol)
+            out[pi[hit]] = True
+        return out

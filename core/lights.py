@@ -169,7 +169,7 @@ class DirectLight:
     """
 
     def __init__(self, lights, patches, samples=BY_NAME["light_samples"].default, world=None,
-                 min_size=0.0, emitters=None):
+                 min_size=0.0, emitters=None, covers=None):
         self.lights = lights if lights is not None else make_lights([])
         self.emitters = emitters if emitters is not None and len(emitters) else None
         n_e = 0 if self.emitters is None else len(self.emitters)
@@ -191,6 +191,8 @@ class DirectLight:
         self.rays = 0
         self.culled = 0                     # (point, light) pairs that cast no shadow rays
         self.min_size = float(min_size)
+        #: Faces lying on other faces (core.covered.Covers): the points under them get no light.
+        self.covers = covers if covers is not None and len(covers) else None
         self._patch_cache = None
         #: Every shadow ray's result (core.shadow_memo), for :meth:`recoloured` copies.
         self.memo = ShadowMemo(len(self))
@@ -297,11 +299,13 @@ class DirectLight:
         np.put_along_axis(out, order, drop, axis=1)
         return out
 
-    def _per_light(self, points, normals, samples):
+    def _per_light(self, points, normals, samples, faces=None):
         """Per light j: (j, bare, scale, centre), each (n,): ``bare`` the point light's
         cos / d^2 (a sun's cos) before shadows, cone, photometry and soft falloff, ``scale`` the
         factor of the light's colour in the irradiance, ``centre`` the light's centre lights the
-        point. Lights culled at a point (:data:`CULL`) count as unshadowed there."""
+        point. Lights culled at a point (:data:`CULL`) count as unshadowed there. ``faces``
+        (n,), the scene face of each point: points that lie under another face (the floor
+        under a box, :class:`core.covered.Covers`) get no light from any light."""
         normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
         k = self.samples if samples is None else int(samples)
         lt = self.lights
@@ -316,6 +320,8 @@ class DirectLight:
             unshadowed += [(f, f.copy(), None, None, size)
                            for f, size in zip(em.unshadowed(origin, normals), em.size)]
         culled = self._culled(unshadowed)
+        under = None if self.covers is None or faces is None \
+            else self.covers.points(points, normals, faces)
         m = len(unshadowed)
         # Shadow rays already cast (core.shadow_memo): read back by a recoloured copy.
         rows, keys = point_keys(points, normals, k)
@@ -349,6 +355,8 @@ class DirectLight:
                 scale[go] *= frac
                 centre[go] = clear
                 cast_frac[go, j], cast_clear[go, j] = frac, clear
+            if under is not None:
+                scale[under], centre[under] = 0.0, False
             yield j, bare, scale, centre
         new = entry < 0
         self.memo.add(rows[new], keys[new], k, cast_frac[new], cast_clear[new])
@@ -493,7 +501,9 @@ class DirectLight:
         jac = jac * wt[None]                                                 # (n, R)
         jac /= np.maximum(jac.sum(axis=1, keepdims=True), 1e-300)
         nrm = np.repeat(patches.normals[which], R, axis=0)
-        for j, bare, scale, _ in self._per_light(pts.reshape(-1, 3), sign * nrm, PATCH_SAMPLES):
+        faces = np.repeat(patches.face[which], R)
+        for j, bare, scale, _ in self._per_light(pts.reshape(-1, 3), sign * nrm, PATCH_SAMPLES,
+                                                 faces):
             yield (j, np.einsum("pr,pr->p", jac, bare.reshape(n, R)),
                    np.einsum("pr,pr->p", jac, scale.reshape(n, R)))
 
