@@ -44,21 +44,35 @@ SINKHORN_RANGE = 1e4
 SINKHORN_DRIFT = 1e2
 #: Passes of make_reciprocal's Sinkhorn scaling, each dropping the nodes found unbalanceable.
 SINKHORN_PASSES = 6
-_BLOCK = 1024
+#: Block side of :func:`_blend` and :func:`asymmetry`, which read each pair of blocks once
+#: straight and once transposed: at 512 a transposed block (1 MB in float32) stays in cache
+#: while it is read. Measured on a random 12,767 x 12,767 float32 matrix (2 cores): the blend
+#: 0.60 s against 1.15 s at 1024 (and 0.72 s against 3.3 s on a matrix not yet paged in); the
+#: blend's bits are the same at any size (element-wise).
+_BLOCK = 512
 
 
 def asymmetry(F, areas, monitor=None):
-    """Area-weighted relative reciprocity error sum|A_i F_ij - A_j F_ji| / sum(A_i F_ij)."""
+    """Area-weighted relative reciprocity error sum|A_i F_ij - A_j F_ji| / sum(A_i F_ij).
+
+    By square blocks (I, J), J >= I, each read once straight and once transposed while in cache
+    (``_BLOCK``); a pair of blocks off the diagonal counts twice (the terms are symmetric).
+    Measured on the kept matrix of a 12,767-patch bake (13,899 nodes, float32, 2 cores): 0.83 s,
+    against 4.3 s by slabs of whole rows and columns in float64 before (the same value to 1e-15).
+    """
+    n = F.shape[0]
+    areas = np.asarray(areas, dtype=np.float64)
     num = 0.0
-    den = 0.0
-    for s in range(0, F.shape[0], _BLOCK):
-        e = min(s + _BLOCK, F.shape[0])
-        g = areas[s:e, None] * F[s:e].astype(np.float64)
-        poll(monitor, "making form factors reciprocal")
-        gt = F[:, s:e].T.astype(np.float64) * areas[None, :]
-        num += float(np.abs(g - gt).sum())
-        den += float(g.sum())
-        poll(monitor, "making form factors reciprocal")
+    den = float(areas @ F.sum(axis=1, dtype=np.float64)) if n else 0.0
+    for s in range(0, n, _BLOCK):
+        e = min(s + _BLOCK, n)
+        ai = areas[s:e, None]
+        for s2 in range(s, n, _BLOCK):
+            e2 = min(s2 + _BLOCK, n)
+            g = ai * F[s:e, s2:e2]
+            g -= F[s2:e2, s:e].T * areas[None, s2:e2]
+            num += (1.0 if s2 == s else 2.0) * float(np.abs(g).sum())
+            poll(monitor, "making form factors reciprocal")
     return num / den if den > 0 else 0.0
 
 

@@ -46,11 +46,17 @@ def _random_rows(n, rng):
     return F / F.sum(axis=1, keepdims=True) * rng.uniform(0.6, 1.0, size=(n, 1))
 
 
+def _random_system(n, dtype, seed):
+    """Random rows (``_random_rows``) in ``dtype`` and random areas."""
+    rng = np.random.default_rng(seed)
+    return _random_rows(n, rng).astype(dtype), rng.uniform(0.1, 2.0, size=n)
+
+
+@pytest.mark.parametrize("n", [60, 1100])
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
-def test_make_reciprocal_is_reciprocal_and_keeps_row_sums(dtype):
-    rng = np.random.default_rng(1)
-    F = _random_rows(60, rng).astype(dtype)
-    A = rng.uniform(0.1, 2.0, size=60)
+def test_make_reciprocal_is_reciprocal_and_keeps_row_sums(dtype, n):
+    # n = 1100: more than two of the blend's blocks (reciprocity._BLOCK), the last one partial.
+    F, A = _random_system(n, dtype, 1)
     out, info = make_reciprocal(F, A)
     G = A[:, None] * out.astype(np.float64)
     # float32 storage rounds each entry to ~6e-8 relative.
@@ -61,6 +67,18 @@ def test_make_reciprocal_is_reciprocal_and_keeps_row_sums(dtype):
     assert out.dtype == dtype
     assert info["asymmetry_before"] > 0.1
     assert info["row_sum_error"] <= reciprocity.RECIPROCITY_TOL
+
+
+@pytest.mark.parametrize("n", [7, 1100])
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_asymmetry_is_its_definition(dtype, n):
+    # Oracle: the formula on the whole matrix at once; asymmetry() goes by blocks, counting a
+    # pair of blocks off the diagonal twice. Only the summation order differs.
+    F, A = _random_system(n, dtype, 4)
+    G = A[:, None] * F.astype(np.float64)
+    want = np.abs(G - G.T).sum() / G.sum()
+    assert want > 0.1
+    assert reciprocity.asymmetry(F, A) == pytest.approx(want, rel=1e-12)
 
 
 def test_make_reciprocal_leaves_reciprocal_rows_alone():
