@@ -169,19 +169,16 @@ class RowStore:
             ck = c >= 0
             if not (rk.any() and ck.any()):
                 continue
+            if not (rk.all() and ck.all()):
+                vals = vals[np.ix_(rk, ck)]
             rows, cols_at = r[rk], c[ck]
-            if not ck.all():
-                vals = vals[:, ck]
-            for s in range(0, len(keys), ASSEMBLE_ROWS):
+            for s in range(0, len(rows), ASSEMBLE_ROWS):
                 # Scattered into whole rows first, then the rows into place: two simple
                 # scatters instead of one over a row x column grid of indices.
-                sel = rk[s:s + ASSEMBLE_ROWS]
                 part = vals[s:s + ASSEMBLE_ROWS]
-                if not sel.all():
-                    part = part[sel]
                 block = np.zeros((len(part), len(col_nodes)), dtype=dtype)
                 block[:, cols_at] = part
-                out[rows[np.count_nonzero(rk[:s]):][:len(part)]] = block
+                out[rows[s:s + ASSEMBLE_ROWS]] = block
             poll(monitor, "assembling form factors")
         return out
 
