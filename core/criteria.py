@@ -25,12 +25,19 @@ SHADOW_SAMPLES = 16
 #: 1,118 -> 1,101 vertices at 1.35 -> 1.36 %.
 SHADOW_CONTRAST = 1.0
 
-#: Leaves along a contact line steeper than ``contrast`` may be split below ``2 min_element``,
-#: down to this fraction of it (:func:`smallest_split`). Measured (bench/compare/coarse.py,
-#: Cornell box modelled coarsely): the strip between the short block's foot and its shadow's
-#: edge, 7 cm wide, was one element at min_element 0.05 m (+200 % on the worst face); with this
-#: rule 10.0 % -> 4.8 % RMS, 949 -> 1,072 vertices (on every steep leaf, not only at contacts:
-#: 3.8 % with 1,464, but the office +70 % vertices for 0.2 points).
+#: Steep leaves may be split below ``2 min_element``, down to this fraction of it
+#: (:func:`smallest_split`): leaves along a contact line steeper than ``contrast``, and any leaf
+#: whose contrast exceeds ``contrast`` also against the scene's mean luminance (not only against
+#: DARK_FLOOR x it: a penumbra on a lit surface, not a dark corner's own level). Measured
+#: (bench/compare/coarse.py, Cornell box modelled coarsely): the strip between the short block's
+#: foot and its shadow's edge, 7 cm wide, was one element at min_element 0.05 m (+200 % on the
+#: worst face); with the contact rule 10.0 % -> 4.8 % RMS, 949 -> 1,072 vertices. The rule
+#: away from contacts (2026-11-29, after the shadow lines, the near elements and min_element
+#: following a small model): the penumbra beside the short block, 3-6 cm from its corner, was
+#: drawn by 2-4 cm leaves (a corner 0.28 for Cycles' 0.18 x the mean; 0.180 with a fine mesh):
+#: Cornell box 2.70 % -> 2.40 % (2,286 -> 2,825 vertices), office 3.45 % -> 3.11 % (14,589 ->
+#: 19,025 vertices); bakes back to back, 2 workers: office 49.0 -> 50.6 s, apartment 95.1 ->
+#: 103.8 s (25,478 -> 30,018 points).
 STEEP_FLOOR = 0.25
 
 #: Leaves along a contact line are split down to this many times min_element (0.25 m at the
@@ -311,7 +318,7 @@ def per_leaf_scores(tree, conf, corner_y, corner_vis, corner_alone, emitting_lea
     where unknown). A leaf with a split-made point among its corners and no interpolation error
     above ``contrast`` there is not split for contrast: the light across its parent was linear,
     which the output's interpolation already draws. Not beyond :data:`LINEAR_RATIO` between
-    its corners, where one midpoint cannot vouch for a line.
+    its corners, where one midpoint cannot vouch for a line. ``floor``: :func:`dark_floor`.
     """
     E = tree.leaves.shape[0]
     hi = _per_leaf(conf, corner_y, E, np.maximum, -np.inf)
@@ -339,7 +346,11 @@ def per_leaf_scores(tree, conf, corner_y, corner_vis, corner_alone, emitting_lea
     contact = touches & (size > CONTACT_ELEMENT * settings.min_element)
     score = np.maximum(score, np.where(contact, 0.5 * area, 0.0))
     score[emitting_leaf] = 0.0
-    limit = np.where(touches, smallest_split(diff, settings), 2.0 * settings.min_element)
+    # Below 2 min_element only where the light changes on the scene's scale (STEEP_FLOOR).
+    vs_mean = np.zeros(E)
+    vs_mean[has] = (hi[has] - lo[has]) / np.maximum(hi[has], floor / DARK_FLOOR)
+    steep_here = touches | (vs_mean > settings.contrast)
+    limit = np.where(steep_here, smallest_split(diff, settings), 2.0 * settings.min_element)
     score[size < limit] = 0.0
     return score, dict(contrast=int(np.count_nonzero(steep > settings.contrast)),
                        shadow=int(np.count_nonzero(shadow)), contact=int(np.count_nonzero(contact)))
@@ -349,7 +360,8 @@ def smallest_split(diff, settings):
     """(E,) float: the smallest leaf size (m) that may still be split, per leaf contrast ``diff``.
 
     ``2 min_element`` where the contrast is at most ``contrast``; where it is steeper (the
-    foot of an object: :func:`per_leaf_scores` applies it to leaves along a contact line)
+    foot of an object, a penumbra: :func:`per_leaf_scores` applies it to leaves along a
+    contact line and to leaves steep against the scene's mean)
     down to ``2 min_element sqrt(contrast / diff)``, never below
     ``STEEP_FLOOR x 2 min_element``: linear interpolation across a leaf errs by about a quarter
     of its contrast at its middle, so a leaf ten times over the threshold is worth halving once

@@ -312,8 +312,9 @@ TABLE = (
                 "at 0.1, 0.58 % with 295 at 0.05; box shadow 1.35 % with 1118 at 0.1, 1.43 % "
                 "with 980 at 0.2."),
     Setting("min_element", "float", None, "Min Element",
-            "Radiosity mesh: smallest element edge refinement makes (at an object's foot, where "
-            "the light falls steeply, down to a quarter of it); auto (0 in the panel): 0.05 m "
+            "Radiosity mesh: smallest element edge refinement makes (at an object's foot and "
+            "in penumbrae, where the light falls steeply, down to a quarter of it); auto (0 in "
+            "the panel): 0.05 m "
             "whatever the scene's units, finer in a model smaller than 2 m across", unit="m",
             low=0, open_low=True, soft=(0.005, 1.0), exposed=True, auto=True,
             doc="Auto: core.adaptive.min_element_size, 0.05 m, at most the scene's bounding "

@@ -14,6 +14,7 @@ from core.criteria import (COPLANAR, STEEP_FLOOR, _Lines, cavity_mask, contact_p
 from core.geometry import patch_extents
 from core.hierarchy import ElementTree
 from core.patches import make_patches
+from core.refine import DARK_FLOOR
 
 from builders import box_quads, quad_patches
 
@@ -112,25 +113,35 @@ def test_an_edge_of_light_centred_on_the_midpoints_is_still_split():
     assert np.all(with_rule[~dark] == 0)
 
 
-def test_steep_leaves_at_a_contact_split_below_min_element():
-    # Leaves 2 m wide, min_element 1.5 m: no leaf may split (2 x min_element = 3 m) unless it is
-    # steep and touches a contact line, where the limit is 2 min_element sqrt(contrast / diff),
-    # never below STEEP_FLOOR x 2 min_element.
+def test_steep_leaves_split_below_min_element():
+    # Leaves 2 m wide, min_element 1.2 m: no leaf may split (2 x min_element = 2.4 m) unless it
+    # is steep, along a contact line or against the scene's mean luminance too; there the limit
+    # is 2 min_element sqrt(contrast / diff), never below STEEP_FLOOR x 2 min_element.
     tree, conf = split_floor()
     pts = conf["corner_verts"]
     C, E = pts.size, tree.n_leaves
     floor = tree.leaf_face == 0
     y = np.where(tree.points[pts][:, 0] < 1e-9, 0.1, 1.0)       # 90 % contrast across x
-    settings = BakeSettings(contrast=0.1, min_element=1.5)
 
-    def split(alone):
+    def split(alone, mean, min_element=1.2):
         s, _ = per_leaf_scores(tree, conf, y, np.zeros(C, np.int64), alone, np.zeros(E, bool),
-                               1e-9, settings)
+                               DARK_FLOOR * mean, BakeSettings(contrast=0.1,
+                                                               min_element=min_element))
         return s[floor] > 0
 
     steep = np.repeat(floor[conf["face_leaf"]], conf["face_sizes"])
-    assert not split(np.zeros(C, bool)).any()
-    assert split(steep).sum() == 2            # the two leaves along x = 0
+    nowhere = np.zeros(C, bool)
+    # In a scene whose mean is 10 the step (0.1 to 1) is 0.18 against the dark floor (5), whose
+    # limit is 2.4 m x sqrt(0.1 / 0.18) = 1.8 m, but 0.09 of the mean: it splits only along a
+    # contact line.
+    assert not split(nowhere, 10.0).any()
+    assert split(steep, 10.0).sum() == 2            # the two leaves along x = 0
+    # Where the mean is 1 the same step is a penumbra on a lit floor: it splits anywhere.
+    assert split(nowhere, 1.0).sum() == 2
+    # Over the limit (min_element 4 m: 8 m x sqrt(0.1 / 0.9) = 2.7 m), not even a steep leaf
+    # along a contact line splits.
+    assert not split(steep, 1.0, min_element=4.0).any()
+    settings = BakeSettings(contrast=0.1, min_element=1.5)
     limit = smallest_split(np.array([0.9, 0.1, 100.0]), settings)
     np.testing.assert_allclose(limit, [3.0 / 3.0, 3.0, 3.0 * STEEP_FLOOR])
 
