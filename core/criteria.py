@@ -324,8 +324,7 @@ def per_leaf_scores(tree, conf, corner_y, corner_vis, corner_alone, emitting_lea
     hi = _per_leaf(conf, corner_y, E, np.maximum, -np.inf)
     lo = _per_leaf(conf, corner_y, E, np.minimum, np.inf)
     has = np.isfinite(hi)
-    diff = np.zeros(E)
-    diff[has] = (hi[has] - lo[has]) / np.maximum(hi[has], floor)
+    diff = _contrast(hi, lo, has, floor)
     area = np.asarray(tree.areas, dtype=np.float64)
     steep = diff
     if corner_interp is not None:
@@ -347,13 +346,19 @@ def per_leaf_scores(tree, conf, corner_y, corner_vis, corner_alone, emitting_lea
     score = np.maximum(score, np.where(contact, 0.5 * area, 0.0))
     score[emitting_leaf] = 0.0
     # Below 2 min_element only where the light changes on the scene's scale (STEEP_FLOOR).
-    vs_mean = np.zeros(E)
-    vs_mean[has] = (hi[has] - lo[has]) / np.maximum(hi[has], floor / DARK_FLOOR)
+    vs_mean = _contrast(hi, lo, has, floor / DARK_FLOOR)     # floor / DARK_FLOOR: the mean
     steep_here = touches | (vs_mean > settings.contrast)
     limit = np.where(steep_here, smallest_split(diff, settings), 2.0 * settings.min_element)
     score[size < limit] = 0.0
     return score, dict(contrast=int(np.count_nonzero(steep > settings.contrast)),
                        shadow=int(np.count_nonzero(shadow)), contact=int(np.count_nonzero(contact)))
+
+
+def _contrast(hi, lo, has, floor):
+    """(E,) float: ``(hi - lo) / max(hi, floor)`` where ``has``, else 0."""
+    out = np.zeros(hi.shape[0])
+    out[has] = (hi[has] - lo[has]) / np.maximum(hi[has], floor)
+    return out
 
 
 def smallest_split(diff, settings):
