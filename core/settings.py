@@ -299,7 +299,10 @@ TABLE = (
                 "4.44 % -> 4.08 %, 1.5 s -> 2.9 s. Its cost grows with furniture: six furnished "
                 "rooms at 30k vertices (bench/bench_scaling.py, 2 workers) 81 s -> 126 s; "
                 "their peak memory, 1.15 GB without it, is 0.87 GB with it since the gather "
-                "rows keep a far patch in one column (core.farfield.FarField)."),
+                "rows keep a far patch in one column (core.farfield.FarField). The gathered "
+                "elements next to another surface are gathered again from the elements "
+                "(core.elements.NEAR_SWEEPS): a room's corners read nearer Cycles' "
+                "(tests/compare/test_room_corners.py)."),
     Setting("contrast", "float", 0.1, "Contrast",
             "Radiosity mesh: split an element when the luminance between its vertices differs by "
             "more than this fraction of the brighter one and the light across it is not linear",
