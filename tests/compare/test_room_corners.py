@@ -7,9 +7,10 @@ bpy = pytest.importorskip("bpy")
 
 from bench.compare import cycles  # noqa: E402
 from core.bake import BakeSettings, bake  # noqa: E402
+from core.criteria import luminance  # noqa: E402
 from core.scene import make_scene  # noqa: E402
 
-from .test_cycles import _arrays  # noqa: E402
+from .test_cycles import _arrays, empty_scene  # noqa: E402,F401 (the fixture)
 
 #: Cycles' samples per corner and seeds of the reference (its noise at the corners: below).
 SAMPLES, SEEDS = 2048, 2
@@ -22,23 +23,15 @@ def _room():
     quads = [[1, 3, 2, 0], [6, 7, 5, 4], [4, 5, 1, 0], [3, 7, 6, 2], [2, 6, 4, 0], [5, 7, 3, 1]]
     a, b, h = 0.75, 1.25, 1.95
     v += [(a, a, h), (b, a, h), (b, b, h), (a, b, h)]
-    quads.append([8, 9, 10, 11])                  # counter-clockwise from above: faces down
-    quads[-1] = quads[-1][::-1]
+    quads.append([11, 10, 9, 8])                  # clockwise from above: faces down
     return _arrays(quads, v, [0] * 6 + [1], [[0.6] * 3, [0.0] * 3], [[0] * 3, [5.0] * 3],
                    [0] * 6 + [1])
-
-
-@pytest.fixture
-def empty_scene():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    yield bpy.context.scene
-    bpy.ops.wm.read_factory_settings(use_empty=True)
 
 
 def _at_room_corners(vertices, corner_verts, face_of_corner, colours, face_ids):
     """(8 corners x 6 faces) luminance of ``colours`` at the room's corners, NaN where a face
     does not touch that corner."""
-    lum = colours @ np.array([0.2126, 0.7152, 0.0722])
+    lum = luminance(colours)
     out = np.full((8, 6), np.nan)
     for k, p in enumerate([(x, y, z) for z in (0, 2) for y in (0, 2) for x in (0, 2)]):
         at = np.flatnonzero(np.all(np.abs(vertices[corner_verts] - p) < 1e-9, axis=1))
