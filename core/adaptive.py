@@ -34,11 +34,12 @@ import time
 
 import numpy as np
 
+from .creases import find_creases
 from .criteria import (SHADOW_SAMPLES, EmitterSamples, contact_edges, contact_points, dark_floor,
                        interpolation_errors, luminance, per_leaf_scores)
 from .duplicates import copy_duplicate_faces
 from .elements import bake_elements
-from .gather import borrow_at_vertex, NORMAL_DECIMALS, corner_groups, shade
+from .gather import NORMAL_DECIMALS, corner_groups, corner_values, shade
 from .farfield import FarField, Seen, compact_with_sums, seen_subset
 from .geometry import spatial_order, unique_rows
 from .hemicube import point_rows
@@ -121,6 +122,8 @@ class AdaptiveState:
     rows : core.rows.RowStore
         Point-to-node rows of the U points (against the nodes the gathers saw: the solved
         patches, or the receiver elements); points that no light reached have none.
+    creases : core.creases.Creases or None
+        The rows' entries read at the light of a concave crease (:mod:`core.creases`).
     lit : (P,) bool
         Patches that received light in the bake (relight rebuilds the mesh if more do).
     elements : core.elements.Elements or None
@@ -150,7 +153,10 @@ class AdaptiveState:
         L = node_radiance
         if self.elements is not None:
             L = self.elements.node_radiance(scene, node_radiance)
-        inc = self.rows.incident(_rows_radiance(self.seen, self.far_field, L)) + self.direct
+        cols = _rows_radiance(self.seen, self.far_field, L)
+        inc = self.rows.incident(cols) + self.direct
+        if self.creases is not None:
+            inc = self.creases.incident(scene, self.material, inc, cols)
         return shade(scene, self.material, inc)[self.entry], inc[self.entry]
 
 
@@ -418,14 +424,9 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
         cache.batches.extend((added[p], cols, vals) for p, cols, vals in batches)
         batches = None                       # the cache holds them now
         ids[new] = added
-        group_value = shade(scene, groups.material, cache.incident[ids])
+        corner_value, corner_inc = corner_values(scene, leaf_scene.corner_verts, groups,
+                                                 cache.incident[ids])
         C = leaf_scene.n_corners
-        corner_value = np.zeros((C, 3))
-        corner_value[ok] = group_value[groups.group[ok]]
-        corner_value = borrow_at_vertex(leaf_scene.corner_verts, groups.group >= 0, corner_value)
-        corner_inc = np.zeros((C, 3))
-        corner_inc[ok] = cache.incident[ids][groups.group[ok]]
-        corner_inc = borrow_at_vertex(leaf_scene.corner_verts, groups.group >= 0, corner_inc)
         step = dict(level=level, leaves=int(tree.leaves.shape[0]),
                     points=int(tree.points.shape[0]), gathered=int(go.size),
                     unlit=int(new.size - go.size))
@@ -452,24 +453,32 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
 
     if far_field is not None:
         far_field.release()
-    mesh = output_mesh(scene, tree, conf, corner_value)
     u_ids, entry = np.unique(ids, return_inverse=True)
     entry = entry.reshape(-1)
+    rows = cache.rows_for(u_ids)
+    material = cache.keys[u_ids, 1].astype(np.int64)
+    creases = find_creases(cache.points[u_ids], cache.normals[u_ids], rows, seen,
+                           crease_angle=settings.crease_angle)
+    if len(creases):
+        cache.incident[u_ids] = creases.incident(scene, material, cache.incident[u_ids], seen_L)
+        corner_value, corner_inc = corner_values(scene, leaf_scene.corner_verts, groups,
+                                                 cache.incident[ids])
+    mesh = output_mesh(scene, tree, conf, corner_value)
     corner_entry = np.zeros(leaf_scene.n_corners, dtype=np.int64)
     corner_entry[ok] = entry[groups.group[ok]]
     mesh, copied = copy_duplicate_faces(scene, mesh)   # stability (issue 11): duplicates' faces
     corner_entry = corner_entry[copied]
     mesh = dataclasses.replace(mesh, corner_incident=corner_inc[copied])
     state = AdaptiveState(mesh=mesh, entry=corner_entry,
-                          material=cache.keys[u_ids, 1].astype(np.int64),
-                          rows=cache.rows_for(u_ids), lit=lit, elements=elements, seen=seen,
+                          material=material, rows=rows, creases=creases, lit=lit,
+                          elements=elements, seen=seen,
                           far_field=far_field,
                           user=_user_corners(scene, mesh), direct=cache.direct[u_ids],
                           points=cache.points[u_ids], normals=cache.normals[u_ids],
                           cast=cache.cast[u_ids])
     report = dict(levels=steps, leaves=int(tree.leaves.shape[0]),
                   points=int(tree.points.shape[0]), budget_hit=budget_hit,
-                  per_object=per_object_report(scene, mesh))
+                  crease_entries=len(creases), per_object=per_object_report(scene, mesh))
     if elements is not None:
         report["elements"] = _elements_report(elements)
     return mesh, state, report

@@ -178,7 +178,7 @@ def gather_rows(patches, groups, *, resolution=64, rotate=True, rng=None, monito
     return store
 
 
-def gathered_colours(scene, groups, store, node_radiance, fallback, direct=None):
+def gathered_colours(scene, groups, store, node_radiance, fallback, direct=None, creases=None):
     """Corner colours from the kept gather rows: ``Le + rho * incident`` of each corner's group.
 
     Parameters
@@ -193,6 +193,8 @@ def gathered_colours(scene, groups, store, node_radiance, fallback, direct=None)
         Light from beyond the hemicube's surfaces (irradiance / pi,
         :meth:`core.lights.DirectLight.extra`: the lights' direct light and the world's
         share) at every group.
+    creases : core.creases.Creases, optional
+        Row entries read at the light of a concave crease (:mod:`core.creases`).
 
     Returns
     -------
@@ -201,11 +203,25 @@ def gathered_colours(scene, groups, store, node_radiance, fallback, direct=None)
     incident = store.incident(node_radiance)
     if direct is not None:
         incident = incident + direct
+    if creases is not None:
+        incident = creases.incident(scene, groups.material, incident, node_radiance)
     L = shade(scene, groups.material, incident)
     out = np.array(fallback, dtype=np.float64, copy=True)
     ok = groups.group >= 0
     out[ok] = L[groups.group[ok]]
     return out
+
+
+def corner_values(scene, corner_verts, groups, incident):
+    """(C, 3) outgoing radiance and (C, 3) incident light of the corners of ``groups`` from
+    the ``incident`` light (G, 3) of the groups (corners of no group borrow at their vertex,
+    :func:`borrow_at_vertex`); ``corner_verts`` (C,) the corners' vertices."""
+    ok = groups.group >= 0
+    value = np.zeros((corner_verts.size, 3))
+    value[ok] = shade(scene, groups.material, incident)[groups.group[ok]]
+    inc = np.zeros((corner_verts.size, 3))
+    inc[ok] = incident[groups.group[ok]]
+    return borrow_at_vertex(corner_verts, ok, value), borrow_at_vertex(corner_verts, ok, inc)
 
 
 def borrow_at_vertex(corner_verts, valid, values):

@@ -27,7 +27,9 @@ import numpy as np
 
 from .colours import corner_colours
 from .covered import covered_fronts
+from .creases import find_creases
 from .elements import bake_elements
+from .farfield import Seen
 from .gather import corner_groups, gather_rows, gathered_colours
 from .orient import BACKLIGHT_RATIO, MIN_LIT
 from .progress import SubMonitor
@@ -467,6 +469,7 @@ class Gather:
     rows: RowStore
     elements: object
     direct: np.ndarray = None
+    creases: object = None        # core.creases.Creases: entries read at a crease's light
 
 
 def make_gather(scene, patches, node_radiance, settings, monitor, on_contact=None, direct=None):
@@ -486,7 +489,10 @@ def make_gather(scene, patches, node_radiance, settings, monitor, on_contact=Non
     at_points = None
     if direct is not None:
         at_points = direct.extra(groups.points, groups.normals, rows.row_sums, sky=rows.sky)
-    return Gather(groups, rows, elements, at_points)
+    creases = find_creases(groups.points, groups.normals, rows,
+                           Seen(seen, np.arange(seen.areas.size)),
+                           crease_angle=settings.crease_angle)
+    return Gather(groups, rows, elements, at_points, creases)
 
 
 def colours(scene, patches, node_radiance, settings, gather):
@@ -512,7 +518,7 @@ def colours(scene, patches, node_radiance, settings, gather):
         fallback = corner_colours(scene, patches, patch_radiance,
                                   crease_angle=settings.crease_angle)
     return gathered_colours(scene, gather.groups, gather.rows, seen_radiance, fallback,
-                            gather.direct), element_report
+                            gather.direct, gather.creases), element_report
 
 
 def gathered_incident(scene, node_radiance, gather):
@@ -524,6 +530,8 @@ def gathered_incident(scene, node_radiance, gather):
     inc = gather.rows.incident(seen_radiance)
     if gather.direct is not None:
         inc = inc + gather.direct
+    if gather.creases is not None:
+        inc = gather.creases.incident(scene, gather.groups.material, inc, seen_radiance)
     out = np.zeros((scene.n_corners, 3))
     ok = gather.groups.group >= 0
     out[ok] = inc[gather.groups.group[ok]]

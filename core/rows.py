@@ -144,6 +144,23 @@ class RowStore:
             out[np.ix_(sel, cols)] = vals[self.where[keys[sel], 1]]
         return out
 
+    def entries(self, keys, cols):
+        """(n,) float32: the stored rows' values at (``keys[i]``, ``cols[i]``) (0 where a row
+        has no value there or is not stored)."""
+        keys, cols = np.asarray(keys, dtype=np.int64), np.asarray(cols, dtype=np.int64)
+        out = np.zeros(keys.size, dtype=np.float32)
+        bs = self.where[keys, 0] if keys.size else np.zeros(0, dtype=np.int64)
+        for b in np.unique(bs[bs >= 0]):
+            sel = np.flatnonzero(bs == b)
+            _, bcols, vals = self.batches[b]
+            if bcols.size == 0:
+                continue
+            order = np.argsort(bcols, kind="stable")    # ascending as made; not relied on
+            at = np.minimum(np.searchsorted(bcols[order], cols[sel]), bcols.size - 1)
+            hit = bcols[order[at]] == cols[sel]
+            out[sel[hit]] = vals[self.where[keys[sel[hit]], 1], order[at[hit]]]
+        return out
+
     def incident(self, node_radiance):
         """(n_rows, 3): ``sum_j F(key -> j) L_j`` for every stored row (zero elsewhere)."""
         out = np.zeros((self.n_rows, 3))

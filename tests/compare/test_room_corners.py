@@ -59,14 +59,15 @@ def test_room_corners_are_as_dark_as_cycles_sees_them(empty_scene):
     assert ok.sum() == 24 and np.array_equal(ok, ~np.isnan(got))
     rel = got[ok] / want[ok] - 1
     # The light dips steeply into a room's corner (the Cornell box's reference of
-    # bench.compare.coarse: 0.067 at a top corner of the back wall, 0.218 at 5 cm from both
-    # edges). A receiver element's one-bounce gather from the coarse patches reads their
-    # means, far brighter than that; gathered again from the elements (core.elements
-    # .NEAR_SWEEPS) the corners come down. Measured: ours / Cycles - 1 on the mean of the 24
-    # corner values, +0.205 without the second gather, +0.148 with it (range +0.055 to
-    # +0.269: the dip is narrower than the elements there, still too bright). Reference noise:
-    # the two seeds differ by 4.4 % per corner on the mean, 0.6 % on the mean of 24 corners of
-    # their average; the bound lies over 4 times that from both.
-    assert rel.mean() < 0.175, rel
-    # Nowhere darker than Cycles: the second gather must not overshoot.
+    # bench.compare.coarse: 0.067 at a top corner of the back wall, 0.218 at 5 cm from both edges).
+    # A receiver element's one-bounce gather from the coarse patches reads their means, far
+    # brighter than that; gathered again from the elements (core.elements.NEAR_SWEEPS) the corners
+    # come down; and a corner point, a fraction of a millimetre off the walls around it, sees of
+    # them almost only their light at the crease, not their elements' centre values (core.creases).
+    # Measured: ours / Cycles - 1 on the mean of the 24 corner values, +0.205 with neither, +0.148
+    # with the second gather (range +0.055 to +0.269), +0.038 with both (range -0.025 to +0.115).
+    # Reference noise: the two seeds differ by 4.4 % per corner on the mean, 0.6 % on the mean of
+    # 24 corners of their average; the bound lies over 8 times that from both +0.148 and +0.038.
+    assert rel.mean() < 0.09, rel
+    # Not darker than Cycles beyond the noise: neither correction may overshoot.
     assert rel.min() > -0.05, rel
