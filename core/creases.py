@@ -28,6 +28,7 @@ correction to its own solution (:meth:`Creases.incident`).
 import numpy as np
 
 from .contacts import _box_pairs
+from .gather import shade
 from .geometry import patch_extents, within_crease
 
 #: A point counts as on the crease of an element when it lies within this fraction of the
@@ -90,8 +91,6 @@ class Creases:
         col_radiance : (n_cols, 3) float64
             What the rows' columns read.
         """
-        from .gather import shade
-
         base = np.asarray(incident, dtype=np.float64)
         if not len(self):
             return base
