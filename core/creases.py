@@ -106,7 +106,7 @@ class Creases:
         return np.maximum(out, 0.0)        # what is taken was added: below 0 only by rounding
 
 
-def find_creases(points, normals, rows, seen, *, crease_angle, cell=None):
+def find_creases(points, normals, rows, seen, *, crease_angle):
     """The entries of ``rows`` to read at crease values (:class:`Creases`).
 
     Parameters
@@ -116,12 +116,11 @@ def find_creases(points, normals, rows, seen, *, crease_angle, cell=None):
     rows : core.rows.RowStore
         Their rows (keys 0..U-1); columns ``[0, K)`` are the front nodes of ``seen``'s K items,
         ``[K, 2K)`` their back nodes (columns beyond, far patches, are never crease entries).
-    seen : core.farfield.Seen
-        The items (receiver elements or patches) the rows' first 2K columns stand for.
+    seen : core.farfield.Seen or core.patches.Patches
+        The items (receiver elements or patches) the rows' first 2K columns stand for (their
+        ``centres``, ``normals``, ``corners`` and ``areas`` are read).
     crease_angle : float
         Degrees: an element within it of the point's normal is the point's own smooth surface.
-    cell : float, optional
-        Grid cell of the pair searches (default: :data:`CELL_QUANTILE` of the item sizes).
     """
     P = np.asarray(points, dtype=np.float64)
     N = np.asarray(normals, dtype=np.float64)
@@ -132,8 +131,7 @@ def find_creases(points, normals, rows, seen, *, crease_angle, cell=None):
         return empty
     C, n_e, X = seen.centres, seen.normals, seen.corners
     _, size = patch_extents(X, C)
-    if cell is None:
-        cell = float(np.quantile(size, CELL_QUANTILE))
+    cell = float(np.quantile(size, CELL_QUANTILE))
     if not cell > 0:                               # every item degenerate: nothing to read
         return empty
     pad = (DEPTH * size)[:, None]

@@ -29,7 +29,6 @@ from .colours import corner_colours
 from .covered import covered_fronts
 from .creases import find_creases
 from .elements import bake_elements
-from .farfield import Seen
 from .gather import corner_groups, gather_rows, gathered_colours
 from .orient import BACKLIGHT_RATIO, MIN_LIT
 from .progress import SubMonitor
@@ -489,8 +488,7 @@ def make_gather(scene, patches, node_radiance, settings, monitor, on_contact=Non
     at_points = None
     if direct is not None:
         at_points = direct.extra(groups.points, groups.normals, rows.row_sums, sky=rows.sky)
-    creases = find_creases(groups.points, groups.normals, rows,
-                           Seen(seen, np.arange(seen.areas.size)),
+    creases = find_creases(groups.points, groups.normals, rows, seen,
                            crease_angle=settings.crease_angle)
     return Gather(groups, rows, elements, at_points, creases)
 
