@@ -308,8 +308,8 @@ TABLE = (
             "more than this fraction of the brighter one and the light across it is not linear",
             low=0, high=1, open_low=True,
             open_high=True, soft=(0.02, 0.5), digits=3, exposed=True,
-            doc="Never relative to less than half the scene's mean luminance, so darkness does "
-                "not refine forever; an element whose parent's new points lie within this "
+            doc="Never relative to less than a quarter of the scene's mean luminance, so darkness "
+                "does not refine forever; an element whose parent's new points lie within this "
                 "fraction of linear is not split (the output interpolates linearly). Measured "
                 "(bench/bench_adaptive.py): one-quad floor 0.80 % mean error with 178 vertices "
                 "at 0.1, 0.58 % with 295 at 0.05; box shadow 1.35 % with 1118 at 0.1, 1.43 % "
