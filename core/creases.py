@@ -17,9 +17,9 @@ element's size of the element's plane, out of the crease angle, with its foot on
 reads that element at the other surface's own value at the foot instead: the inverse-distance
 mean of the other surface's two gather points on the crease nearest the foot (points in the
 element's plane to the contact tolerance, facing its side, within ``DEPTH`` x its size of the
-point's own plane and in front of it; of those at the foot itself, one on the element first). The two surfaces' crease
-values depend on each other, so the correction is swept :data:`SWEEPS` times (Jacobi) from the
-points' gathered light.
+point's own plane and in front of it; of those at the foot itself, one on the element first).
+The two surfaces' crease values depend on each other, so the correction is swept
+:data:`SWEEPS` times (Jacobi) from the points' gathered light.
 
 The same rows are read: only the value a row's entry reads changes, so relight applies the same
 correction to its own solution (:meth:`Creases.incident`).
