@@ -36,7 +36,7 @@ from .orient import orient
 from .patches import make_patches, subdivide_patches
 from .pipeline import (check_result, colours, form_factors, gathered_incident, make_gather,
                        node_arrays, solve, with_world)
-from .progress import Monitor
+from .progress import Monitor, watching
 from .reciprocity import make_reciprocal
 from .recolour import recoloured, regathered
 from .refine import refine_mask
@@ -129,7 +129,8 @@ def bake(scene, settings=None, *, progress=None, cancel=None):
     settings = BakeSettings() if settings is None else settings
     if not isinstance(settings, BakeSettings):
         raise TypeError(f"settings must be a BakeSettings; got {type(settings).__name__}")
-    with parallel.using(settings.workers, cancel) as shared, memory.stages() as peaks:
+    with parallel.using(settings.workers, cancel) as shared, memory.stages() as peaks, \
+            watching(cancel):
         result = _bake(scene, settings, progress, cancel)
     result.report["peak_mb"] = peaks
     result.report["workers"] = dict(processes=shared["processes"], shared_calls=shared["calls"])
@@ -324,6 +325,13 @@ def relight(result, *, reflectance=None, emission=None, back_emission=None, ligh
     -------
     BakeResult
     """
+    with watching(cancel):
+        return _relight(result, reflectance=reflectance, emission=emission,
+                        back_emission=back_emission, lights=lights, progress=progress,
+                        cancel=cancel)
+
+
+def _relight(result, *, reflectance, emission, back_emission, lights, progress, cancel):
     if not isinstance(result, BakeResult) or not isinstance(result._state, _State):
         raise TypeError(f"result must be a BakeResult from bake(); got {type(result).__name__}")
     state = result._state

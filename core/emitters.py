@@ -12,10 +12,11 @@ as :mod:`core.lights` lights do::
 face, any size, however near, clipped to ``x``'s horizon. ``V`` is the visible fraction from
 shadow rays to points on the face, each weighted by the point-to-area kernel
 ``cos_x cos_y / r^2`` (a fraction of the form factor, not of the area; Wallace, Elmquist & Haines
-1989): ``FIRST_ROUND`` rays, one to the face's anchor and one to each of its corners (``RIM``);
-where they disagree (a penumbra), ``samples`` more. A face narrower than ``min_size`` casts the
-anchor's ray only. The samples are a rank-1 lattice on the face's patches turned per point
-(Cranley-Patterson), so neighbouring points do not share one pattern.
+1989): first one ray to the face's anchor and one to each of its corners (``RIM``); where all
+of them are blocked the face is hidden (a lamp in the next room), else ``FIRST_ROUND`` rays
+more and, where they disagree (a penumbra), ``samples`` more. A face narrower than
+``min_size`` casts the anchor's ray only. The samples are a rank-1 lattice on the face's
+patches turned per point (Cranley-Patterson), so neighbouring points do not share one pattern.
 
 The solve and the gathers then carry only what the emitters *reflect*: their emission enters as
 the first bounce, like a point light's (:class:`core.pipeline.Nodes`, ``exact``).
@@ -34,6 +35,7 @@ import numpy as np
 from .exact import bilinear, gauss_square, pair_form_factor, point_polygon_form_factor
 from .geometry import patch_extents
 from .patches import connected_labels
+from .progress import checkpoint
 from .transfer import padded_polygons
 
 #: Emissive faces lit exactly at most (by material, fewest faces first). Measured cost: one
@@ -49,13 +51,23 @@ MAX_FACES = 64
 MAX_AREA_SHARE = 0.1
 
 #: 'auto' lights exactly the emitters narrower than this many hemicube pixels seen across the
-#: scene: a 1 cm^2 lamp in a 4 m room (0.16 px at R = 64) is missed by most gathers, a 0.3 m
-#: panel (4.8 px) aliases by -25 % to +52 % at single vertices but is right on average; wider
-#: sources keep the hemicube, whose cost does not grow with the points x faces.
+#: scene: a 1 cm^2 lamp in a 4 m room (0.16 px at R = 64) is missed by most gathers. Wider
+#: lamps alias: 2.95 m over a floor in a 4 m room (bench.stability.scenes.emitter_room), the
+#: hemicube's mean error at the floor's vertices is 7.8 % at 0.3 m (4.8 px; worst vertex 52 %),
+#: 2.7 % at 0.6 m (9.6 px), 1.0 % at 1 m (16 px), where the exact light reads 0.005 %; in lit
+#: rooms the interreflection averages it out. At 16 px (tried 2026-12-05, which takes all three
+#: samples' lamps) the Cornell box read 1.31 -> 1.18 %, the office 2.65 -> 2.58 % but took
+#: 44 -> 56 s, the apartment 3.06 -> 3.12 % and 86 -> 121 s, and the office furnace of
+#: tests/core/test_stability.py read up to 1.1 % high (patches beside its 0.6 m panel, whose
+#: shadowed share is sampled): so 2 until that is fixed.
 AUTO_PIXELS = 2.0
 
-#: Shadow rays per (point, emitter) in the first round; where they, the anchor's and the rim's
-#: all agree, no more are cast.
+#: Shadow rays per (point, emitter) in the first round, cast where the anchor's or a rim ray
+#: is clear; where they, the anchor's and the rim's all agree, no more are cast. Where the
+#: anchor's and the rim's rays are all blocked, none are: the apartment sample (six lamps in
+#: five rooms, all lit exactly) 132 -> 124 s at the same error (2026-12-05); a lamp seen only
+#: through a gap that misses its anchor and its corners reads 0 (before, 8 lattice rays might
+#: find it; tests/core/test_emitters.py).
 FIRST_ROUND = 8
 
 #: The first round also casts one ray to each corner of the face (at most ``RIM_CORNERS``,
@@ -342,6 +354,7 @@ class Emitters:
                 m = u.size
                 step = max(1, NEAR_CHUNK // m)
                 for a in range(0, rows.size, step):
+                    checkpoint()
                     r = rows[a:a + step]
                     y, jac = bilinear(self._corners[kk[r]], np.broadcast_to(u, (r.size, m)),
                                       np.broadcast_to(v, (r.size, m)))
@@ -430,19 +443,24 @@ class Emitters:
                              d.reshape(-1, 3)).reshape(rows.size, index.size)
             return clear, w
 
-        everyone = np.arange(g)
-        first, w1 = cast(everyone, np.arange(FIRST_ROUND))
-        frac = _weighted(first, w1)
         rim = self._rim[q]
         edge = ~blocked(np.repeat(origin, rim.shape[0], axis=0),
                         (rim[None, :, :] - origin[:, None, :]).reshape(-1, 3)
                         ).reshape(g, rim.shape[0])
-        lit = first.sum(axis=1) + centre + edge.sum(axis=1)
-        mixed = np.flatnonzero((lit > 0) & (lit < FIRST_ROUND + 1 + rim.shape[0]))
-        if mixed.size:
+        probe = centre + edge.sum(axis=1)
+        frac = np.zeros(g)
+        seen = np.flatnonzero(probe > 0)            # the others see the lamp hidden
+        if not seen.size:
+            return frac, centre
+        first, w1 = cast(seen, np.arange(FIRST_ROUND))
+        frac[seen] = _weighted(first, w1)
+        lit = first.sum(axis=1) + probe[seen]
+        part = np.flatnonzero(lit < FIRST_ROUND + 1 + rim.shape[0])
+        if part.size:
+            mixed = seen[part]
             more, w2 = cast(mixed, FIRST_ROUND + np.arange(k))
-            frac[mixed] = _weighted(np.concatenate([first[mixed], more], axis=1),
-                                    np.concatenate([w1[mixed], w2], axis=1))
+            frac[mixed] = _weighted(np.concatenate([first[part], more], axis=1),
+                                    np.concatenate([w1[part], w2], axis=1))
         return frac, centre
 
 

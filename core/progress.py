@@ -1,5 +1,7 @@
 """Progress reporting and cancellation, shared by every long-running stage."""
 
+import contextlib
+import threading
 import time
 
 from .constants import POLL_INTERVAL
@@ -57,6 +59,29 @@ def poll(monitor, message):
     """
     if monitor is not None and monitor.due():
         monitor.update(0.0, message)
+
+
+_running = threading.local()
+
+
+@contextlib.contextmanager
+def watching(cancel):
+    """Within the block, :func:`checkpoint` in this thread honours ``cancel`` (the bake's
+    cancel check, or None): for work deep in a stage that has no monitor at hand."""
+    previous = getattr(_running, "cancel", None)
+    _running.cancel = cancel
+    try:
+        yield
+    finally:
+        _running.cancel = previous
+
+
+def checkpoint():
+    """Raise BakeCancelled if the bake running in this thread (:func:`watching`) is asked to
+    stop; outside a bake, nothing."""
+    cancel = getattr(_running, "cancel", None)
+    if cancel is not None and cancel():
+        raise BakeCancelled("bake cancelled")
 
 
 #: A monitor that never reports and never cancels.

@@ -19,6 +19,10 @@ import numpy as np
 #: lacks, as a bake does. 150k points and 20 lights take about 35 MB.
 BUDGET = 256 * 2**20
 
+#: ``frac`` of a pair that cast only the ray to the light's centre (a light culled at the point,
+#: core.lights.CULL); ``clear`` holds that ray. A pair cast in full holds its centre ray too.
+ONE_RAY = -1.0
+
 #: Odd 64-bit multipliers of the six coordinates' bit patterns (wrapping arithmetic).
 _MIX = np.array([0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9,
                  0xD6E8FEB86659FD93, 0xFF51AFD7ED558CCD, 0xC4CEB9FE1A85EC53], dtype=np.uint64)
@@ -48,7 +52,8 @@ class ShadowMemo:
     Attributes
     ----------
     frac : (N, m) float64
-        Visible fraction of light j at point i (NaN: not cast there).
+        Visible fraction of light j at point i (NaN: not cast there; ``ONE_RAY``: only the
+        ray to its centre).
     clear : (N, m) bool
         The ray to light j's centre from point i is clear (where ``frac`` is set).
     """

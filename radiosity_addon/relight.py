@@ -289,8 +289,9 @@ def _unit(entry, k):
 def _own(entry, k):
     """The lights of unit k alone, without the world, at ``lights_ref``'s power (kept until
     they are cast again): cast alone, or, once every other unit of lights has its own, the
-    rest of the lights' solution (no cast; it then also carries what the core's light culling,
-    core.lights.CULL, gave the others where they were culled and hidden)."""
+    rest of the lights' solution (no cast; it then also carries the difference the core's light
+    culling makes, core.lights.CULL: a light culled at a point casts one ray there, not its
+    penumbra's rounds)."""
     if k not in entry.own:
         others = [j for j, u in enumerate(entry.units) if u.materials is None and u.lights
                   and j != k]

@@ -372,10 +372,10 @@ def test_a_bake_whose_kept_data_exceeds_the_memory_budget_is_not_kept(package, m
 # ----------------------------------------------------------------------------- one group a light
 
 #: The core's light culling (core.lights.CULL): at each point the lights that give at most this
-#: fraction of its unshadowed light cast no shadow ray and count as unshadowed. A mix is the
-#: bake (which culls) plus groups cast alone (which do not), so where a culled light is in fact
-#: hidden it may differ from a fresh bake by at most CULL of the light arriving there, itself at
-#: most the brightest value of the bake.
+#: fraction of its unshadowed light cast one ray, to their centre, not their penumbra's rounds.
+#: A mix is the bake (which culls) plus groups cast alone (which do not), so where a culled
+#: light is in part hidden it may differ from a fresh bake by at most CULL of the light arriving
+#: there, itself at most the brightest value of the bake.
 CULL = PACKAGE.core.lights.CULL
 
 

@@ -470,6 +470,28 @@ def test_cancel_stops_within_half_a_second():
     assert stopped - when["t"] < 0.5, stopped - when["t"]
 
 
+def test_cancel_stops_within_half_a_second_in_the_lights_stage(monkeypatch):
+    # Flipped as the patches' direct light begins (exact emitters: contour integrals, then
+    # shadow rays over every patch's Gauss points), which ran 1.2 s with no look at the flag
+    # until the lights polled it between passes (core.progress.checkpoint).
+    from core import lights
+
+    scene = room_with_boxes(3000)
+    flipped = threading.Event()
+    when = {}
+    real = lights.DirectLight._patch_incident
+
+    def flip_then_run(self, *args, **kwargs):
+        when["t"] = time.perf_counter()
+        flipped.set()
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(lights.DirectLight, "_patch_incident", flip_then_run)
+    with pytest.raises(BakeCancelled):
+        bake(scene, BakeSettings(patch_size=1.0, exact_direct="all"), cancel=flipped.is_set)
+    assert time.perf_counter() - when["t"] < 0.5, time.perf_counter() - when["t"]
+
+
 def test_deterministic_given_seed(small_room, monkeypatch):
     a = bake(small_room, _settings(patch_size=1.0, seed=7))
     # Batch sizes come from a cost model, never from the clock: a machine ten times slower

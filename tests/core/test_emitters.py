@@ -335,3 +335,42 @@ def test_a_lamp_seen_in_part_gives_the_light_of_its_visible_part(patch):
     assert small.size >= 60
     dark = np.mean(dl.incident(pts[small], up[small])[:, 0] == 0)
     assert dark <= DARK_SHARE, dark
+
+
+def test_a_lamp_seen_only_through_a_slit_that_misses_its_probes_reads_dark():
+    """Where the probe breaks (core.emitters.FIRST_ROUND): a 1 m lamp 2 m over a floor point,
+    seen from it only through a slit in a black plate 1 m up that shows the strip y in
+    [0.05, 0.15] of the lamp: 10 % of it, missing its anchor (the centre of its largest patch)
+    and its corners. The rays to them are all blocked, so the point reads 0 (the lattice rays
+    are not cast). A slit that shows the anchor is found, and its light is sampled."""
+    from core.emitters import Emitters
+    from core.lights import DirectLight
+    from core.patches import make_patches
+
+    lamp = np.array([[-0.5, -0.5, 2.0], [-0.5, 0.5, 2.0], [0.5, 0.5, 2.0], [0.5, -0.5, 2.0]])
+    p, up = np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]])
+
+    def seen_through(lo, hi):
+        """(read, exact) Le F at p through the strip lo < y < hi of the lamp, and its anchor."""
+        # Two plates at z = 1 facing down; the slit between them is the strip's shadow.
+        below = [[-3, -3, 1], [-3, lo / 2, 1], [3, lo / 2, 1], [3, -3, 1]]
+        above = [[-3, hi / 2, 1], [-3, 3, 1], [3, 3, 1], [3, hi / 2, 1]]
+        v = np.array([[-3, -3, 0], [3, -3, 0], [3, 3, 0], [-3, 3, 0]] + below + above
+                     + lamp.tolist(), dtype=np.float64)
+        scene = scene_from_polygons(v, [[0, 1, 2, 3], [4, 5, 6, 7], [8, 9, 10, 11],
+                                        [12, 13, 14, 15]], [0, 1, 1, 2],
+                                    [[RHO] * 3, [0.0] * 3, [0.0] * 3],
+                                    [[0.0] * 3, [0.0] * 3, [1.0] * 3])
+        patches = make_patches(scene, 0.5)
+        em = Emitters(scene, patches, exact_materials(scene, "all"))
+        dl = DirectLight(None, patches, BakeSettings().light_samples, emitters=em)
+        strip = lamp.copy()
+        strip[[0, 3], 1], strip[[1, 2], 1] = lo, hi
+        return (dl.incident(p, up)[0, 0], point_polygon_form_factor(p, up, strip[None])[0, 0],
+                em._anchor[0])
+
+    got, want, anchor = seen_through(0.05, 0.15)
+    assert not 0.05 < anchor[1] < 0.15
+    assert want > 0.005 and got == 0.0
+    got, want, _ = seen_through(anchor[1] - 0.05, anchor[1] + 0.05)     # the anchor shows
+    assert got == pytest.approx(want, rel=0.25)

@@ -61,8 +61,9 @@ def test_new_power_and_colour_give_a_fresh_bake_without_a_shadow_ray():
 
 @pytest.mark.parametrize("shadow_cuts", [False, True])
 def test_lights_relit_alone_add_up_to_the_bake_on_its_mesh(monkeypatch, shadow_cuts):
-    # No culling (core.lights.CULL): a culled light counts unshadowed where the bake skipped
-    # it, so the parts would add up only to within CULL. Direct solve (few nodes): exact.
+    # No culling (core.lights.CULL): a culled light casts one ray where the bake culled it,
+    # not its penumbra's rounds, so the parts would add up only to within CULL. Direct solve
+    # (few nodes): exact.
     # With the shadow lines a light at power 0 keeps the bake's lines (and patches): the light
     # groups' parts must share them to add up.
     monkeypatch.setattr(lights_module, "CULL", 0.0)
