@@ -199,7 +199,7 @@ class DirectLight:
         self.offset = RAY_OFFSET * extent
         self.extent = max(extent, np.finfo(float).tiny)
         self.rays = 0
-        self.culled = 0                     # (point, light) pairs that cast one shadow ray
+        self.culled = 0                     # (point, light) pairs culled: one ray each (CULL)
         self.min_size = float(min_size)
         #: Faces lying on other faces (core.covered.Covers): the points under them get no light.
         self.covers = covers if covers is not None and len(covers) else None
