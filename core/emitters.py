@@ -59,7 +59,7 @@ MAX_AREA_SHARE = 0.1
 #: samples' lamps) the Cornell box read 1.31 -> 1.18 %, the office 2.65 -> 2.58 % but took
 #: 44 -> 56 s, the apartment 3.06 -> 3.12 % and 86 -> 121 s, and the office furnace of
 #: tests/core/test_stability.py read up to 1.1 % high (patches beside its 0.6 m panel, whose
-#: shadowed share is sampled): so 2 until that is fixed.
+#: rows disagree with their exact light: README, "Why that furnace fails"): so 2.
 AUTO_PIXELS = 2.0
 
 #: Shadow rays per (point, emitter) in the first round, cast where the anchor's or a rim ray
