@@ -47,7 +47,8 @@ MAX_FACES = 64
 #: against its room; a luminous ceiling or a furnace (every wall emits) is an extended source
 #: that the hemicube sees well, while the visible fraction of a large face that furniture hides
 #: in part needs many shadow rays (a furnace office with every face emitting: up to 12 % off
-#: with the first round's rays).
+#: with the first round's rays; mostly the rows' disagreement with the exact light, README
+#: "Why that furnace fails").
 MAX_AREA_SHARE = 0.1
 
 #: 'auto' lights exactly the emitters narrower than this many hemicube pixels seen across the
