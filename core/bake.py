@@ -27,6 +27,7 @@ from .covered import Covers
 from .criteria import cavity_mask, face_variation, near_emitter_mask, unlit_late_nodes
 from .emitters import Emitters, exact_materials
 from .footlines import foot_lines, shadow_lines
+from .gaplines import gap_lines
 from .lights import DirectLight, same_geometry
 from .light_list import Lights, make_lights
 from .duplicates import (duplicate_warning, fill_duplicate_colours, merge_duplicates,
@@ -217,8 +218,10 @@ def _non_decreasing(progress):
 
 def _solve_patches(scene, settings, check, back_open=None):
     """The solve's patches: the grid, the near-emitter and cavity splits ('mesh' output; the
-    backs of ``back_open`` (F,) bool faces bound cavities too), the contact cuts. Returns
-    ``(patches, found contacts or None, the contacts' report or None)``."""
+    backs of ``back_open`` (F,) bool faces bound cavities too), the contact and gap cuts. Returns
+    ``(patches, found contacts or None, the contacts' report or None)``. The gap lines
+    (:mod:`core.gaplines`) cut after the contacts; like the shadow lines they are not contact
+    lines (the light is continuous across them, only steep)."""
     patches = make_patches(scene, settings.patch_size)
     if settings.output_mode == "mesh":
         patches = _split_near(scene, patches, settings.min_element, settings.emitter_levels,
@@ -227,6 +230,12 @@ def _solve_patches(scene, settings, check, back_open=None):
     if settings.contact_cuts:
         found = find_contacts(scene, patches)
         patches, _, contacts = split_at_contacts(scene, patches, found)
+        if settings.gap_cuts:
+            lines, count = gap_lines(scene, patches, settings.min_element, tol=found.tol,
+                                     back_open=back_open)
+            patches, _, near = split_at_contacts(scene, patches, lines)
+            contacts = dict(contacts, gap_lines=count, gap_cuts=near["cuts"],
+                            gap_added=near["added"])
         if settings.shadow_cuts:
             lines, count = foot_lines(scene, patches, found, settings.contrast,
                                       settings.min_element)

@@ -73,8 +73,9 @@ def contact_segments(scene, faces, plane_n, plane_d, tol):
         Unit normals of the planes.
     plane_d : (K,) float
         Offsets: plane k is ``x . plane_n[k] = plane_d[k]``.
-    tol : float
-        Distance (m) within which a corner lies in the plane.
+    tol : float or (K,) float
+        Distance (m) within which a corner lies in the plane (per plane, or one for all); a
+        segment must be longer than it.
 
     Returns
     -------
@@ -90,6 +91,7 @@ def contact_segments(scene, faces, plane_n, plane_d, tol):
     ok = np.zeros(K, dtype=bool)
     if K == 0:
         return a, b, ok
+    tol = np.broadcast_to(np.asarray(tol, dtype=np.float64), (K,))
     n_g = scene.face_normals[faces]
     cand = np.abs(np.einsum("ij,ij->i", n_g, plane_n)) <= constants.tol.parallel_cos
     rows = np.flatnonzero(cand)
@@ -104,8 +106,9 @@ def contact_segments(scene, faces, plane_n, plane_d, tol):
     d = plane_d[rows][owner]
     hp = np.einsum("ij,ij->i", p, n) - d
     hq = np.einsum("ij,ij->i", q, n) - d
-    sp = np.where(np.abs(hp) <= tol, 0.0, np.sign(hp))
-    sq = np.where(np.abs(hq) <= tol, 0.0, np.sign(hq))
+    near = tol[rows][owner]
+    sp = np.where(np.abs(hp) <= near, 0.0, np.sign(hp))
+    sq = np.where(np.abs(hq) <= near, 0.0, np.sign(hq))
     # Per face: corners on each side and in the plane.
     n_on = np.add.reduceat((sp == 0).astype(np.int64), starts)
     any_pos = np.maximum.reduceat(sp, starts) > 0
@@ -127,7 +130,7 @@ def contact_segments(scene, faces, plane_n, plane_d, tol):
     at_hi = np.flatnonzero(point_ok & (s_hi == hi[owner]))
     a[rows[owner[at_lo[::-1]]]] = point[at_lo[::-1]]
     b[rows[owner[at_hi[::-1]]]] = point[at_hi[::-1]]
-    ok[rows] = meets & (hi - lo > tol)
+    ok[rows] = meets & (hi - lo > tol[rows])
     # Into the plane exactly (crossing points and corners are within tol of it).
     a -= (np.einsum("ij,ij->i", a, plane_n) - plane_d)[:, None] * plane_n
     b -= (np.einsum("ij,ij->i", b, plane_n) - plane_d)[:, None] * plane_n

@@ -243,6 +243,13 @@ TABLE = (
             "Cut patches along the lines where objects touch or pierce a surface (a box on a "
             "floor), so no light leaks under objects and their feet are not too dark",
             exposed=True, doc="core.contacts."),
+    Setting("gap_cuts", "bool", True, "Cut at Gaps",
+            "With Cut at Contacts: also cut patches where an object's edge runs close in "
+            "front of a surface without touching it (a shelf board 2 cm off a wall), so the "
+            "dark slot behind it does not take the lit side's light",
+            exposed=True,
+            doc="core.gaplines: within Min Element. Office (coarse model) against Cycles, "
+                "3 x 1024 spp: 2.65 % -> 2.25 %, 1.23x the time."),
     Setting("shadow_cuts", "bool", True, "Cut at Shadows",
             "With Cut at Contacts: also cut patches along the shadow lines that leave an "
             "object's corners on the surface it stands on, towards each light, so a penumbra "

@@ -138,6 +138,9 @@ def draw_advanced(layout, props):
     sub = col.row()
     sub.active = props.contact_cuts
     sub.prop(props, "shadow_cuts")
+    sub = col.row()
+    sub.active = props.contact_cuts
+    sub.prop(props, "gap_cuts")
     col.prop(props, "selected_only")
     col.prop(props, "make_single_user")
 
