@@ -316,12 +316,7 @@ def find_contacts(scene, patches, *, tol=None):
     dev = np.abs(np.einsum("ikj,ij->ik", patches.corners, n_f) - d_f[:, None]).max(axis=1)
     planar = np.flatnonzero((dev <= tol) & scene.face_valid[face])
     size = np.sqrt(patches.areas)
-    # Face bounding boxes (face_corner_indices lists the corners face after face).
-    corners, _ = scene.face_corner_indices()
-    pos = scene.vertices[scene.corner_verts[corners]]
-    starts = np.cumsum(scene.face_sizes) - scene.face_sizes
-    fmin = np.minimum.reduceat(pos, starts, axis=0)
-    fmax = np.maximum.reduceat(pos, starts, axis=0)
+    fmin, fmax = face_boxes(scene)
     valid_f = np.flatnonzero(scene.face_valid)
     if planar.size == 0 or valid_f.size == 0:
         return Contacts(*_no_pairs(), np.zeros(scene.vertices.shape[0], dtype=bool), tol)
@@ -347,6 +342,15 @@ def find_contacts(scene, patches, *, tol=None):
     o = np.lexsort((gi, pi))
     return Contacts(pi[o], a[o], u[o], w[o], length[o], on_line, tol, cuts=hit[o], other=gi[o],
                     normal=n_f[pi[o]])
+
+
+def face_boxes(scene):
+    """(F, 3), (F, 3): the lower and upper corners of every face's bounding box
+    (``face_corner_indices`` lists the corners face after face)."""
+    corners, _ = scene.face_corner_indices()
+    pos = scene.vertices[scene.corner_verts[corners]]
+    starts = np.cumsum(scene.face_sizes) - scene.face_sizes
+    return np.minimum.reduceat(pos, starts, axis=0), np.maximum.reduceat(pos, starts, axis=0)
 
 
 def _on_outline(scene, f, m, tol):

@@ -31,7 +31,7 @@ import numpy as np
 
 from . import constants
 from .contacts import (Contacts, _box_pairs, _clear_of_corners, _crossed, _lines_of,
-                       contact_segments)
+                       contact_segments, face_boxes)
 from .geometry import ragged
 from .patches import triangle_mask
 
@@ -94,10 +94,7 @@ def gap_lines(scene, patches, gap, *, tol=None, back_open=None):
     receives = ~lamp[np.asarray(patches.material)]
     if valid_f.size == 0 or not receives.any():
         return none, 0
-    starts = np.cumsum(scene.face_sizes) - scene.face_sizes
-    pos = scene.vertices[scene.corner_verts[scene.face_corner_indices()[0]]]
-    fmin = np.minimum.reduceat(pos, starts, axis=0)[valid_f]
-    fmax = np.maximum.reduceat(pos, starts, axis=0)[valid_f]
+    fmin, fmax = (box[valid_f] for box in face_boxes(scene))
     reach = np.maximum(gap, GAP_SHARE * size)
     cell = max(float(np.median(size)), gap)
     pi, gi = _box_pairs(corners.min(axis=1) - reach[:, None], corners.max(axis=1)
