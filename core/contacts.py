@@ -25,7 +25,7 @@ patch crossed by several lines is cut by each in turn (at most :data:`MAX_CUTS`)
 import numpy as np
 
 from . import constants
-from .geometry import newell_normals_areas, ragged
+from .geometry import box_pairs, inside_polygons, newell_normals_areas, ragged
 from .patches import Patches, assemble_patches, material_table, triangle_mask
 
 
@@ -201,46 +201,6 @@ def _edge_crossings(h, k):
     return nxt, cross, np.where(cross, h / np.where(cross, h - hn, 1.0), 0.0)
 
 
-def _box_pairs(lo_a, hi_a, lo_b, hi_b, cell):
-    """Pairs (i, j) of boxes a_i, b_j (any dimension) that overlap, found through a uniform grid.
-
-    Each box is entered in the cells of side ``cell`` it covers; pairs sharing a cell are
-    candidates, kept once, and checked for overlap. Cost ~ the number of (box, cell) entries,
-    not len(a) x len(b).
-    """
-    if lo_a.shape[0] == 0 or lo_b.shape[0] == 0:
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    origin = np.minimum(lo_a.min(axis=0), lo_b.min(axis=0))
-    dim = lo_a.shape[1]
-
-    def cells(lo, hi):
-        c0 = np.floor((lo - origin) / cell).astype(np.int64)
-        c1 = np.floor((hi - origin) / cell).astype(np.int64)
-        extent = c1 - c0 + 1
-        owner, local, _ = ragged(np.prod(extent, axis=1))
-        key = np.zeros(owner.size, dtype=np.int64)
-        rest = local
-        for axis in range(dim - 1, -1, -1):
-            e = extent[owner, axis]
-            key = key + (c0[owner, axis] + rest % e) * (np.int64(1) << (21 * axis))
-            rest = rest // e
-        return owner, key
-
-    oa, ka = cells(lo_a, hi_a)
-    ob, kb = cells(lo_b, hi_b)
-    order = np.argsort(ka, kind="stable")
-    ka, oa = ka[order], oa[order]
-    first = np.searchsorted(ka, kb, side="left")
-    count = np.searchsorted(ka, kb, side="right") - first
-    jb, local, _ = ragged(count)
-    ia = oa[first[jb] + local]
-    jb = ob[jb]
-    key = np.unique(ia * np.int64(lo_b.shape[0]) + jb)
-    ia, jb = key // lo_b.shape[0], key % lo_b.shape[0]
-    ok = np.all((lo_a[ia] <= hi_b[jb]) & (hi_a[ia] >= lo_b[jb]), axis=1)
-    return ia[ok], jb[ok]
-
-
 class Contacts:
     """The contact lines of a scene, as they cross its patches and pass through its vertices.
 
@@ -319,11 +279,11 @@ def find_contacts(scene, patches, *, tol=None):
     fmin, fmax = face_boxes(scene)
     valid_f = np.flatnonzero(scene.face_valid)
     if planar.size == 0 or valid_f.size == 0:
-        return Contacts(*_no_pairs(), np.zeros(scene.vertices.shape[0], dtype=bool), tol)
+        return no_contacts(scene, tol)
     cell = max(float(np.median(size[planar])), diag / GRID_CELLS, tol)
     pc = patches.corners[planar]
-    pi, gi = _box_pairs(pc.min(axis=1) - tol, pc.max(axis=1) + tol, fmin[valid_f] - tol,
-                        fmax[valid_f] + tol, cell)
+    pi, gi = box_pairs(pc.min(axis=1) - tol, pc.max(axis=1) + tol, fmin[valid_f] - tol,
+                       fmax[valid_f] + tol, cell)
     pi, gi = planar[pi], valid_f[gi]
     keep = gi != face[pi]
     pi, gi = pi[keep], gi[keep]
@@ -334,8 +294,12 @@ def find_contacts(scene, patches, *, tol=None):
     k = np.where(patches.is_triangle, 3, 4)[pi]
     hit = _crossed(patches.corners[pi], k, size[pi], a, u, w, length, tol)
     along = ~hit & _crossed(patches.corners[pi], k, size[pi], a, u, w, length, tol, along=True)
-    along[along] = ~_on_outline(scene, face[pi[along]], a[along] + 0.5 * length[along, None]
-                                * u[along], tol)
+    edge = np.flatnonzero(along)
+    mid = a[edge] + 0.5 * length[edge, None] * u[edge]
+    crease = _on_outline(scene, face[pi[edge]], mid, tol)
+    crease[crease] = ~_continues(patches, pi[edge[crease]], mid[crease], w[edge[crease]], tol,
+                                 cell)
+    along[edge] = ~crease
     keep = hit | along
     pi, a, u, w, length, hit = pi[keep], a[keep], u[keep], w[keep], length[keep], hit[keep]
     gi = gi[keep]
@@ -371,6 +335,34 @@ def _on_outline(scene, f, m, tol):
     return out
 
 
+#: How far across a line on a face's outline (in contact distances) the surface is probed for.
+PROBE = 4.0
+
+
+def _continues(patches, p, m, w, tol, cell):
+    """(n,) bool: the surface of patch p[i] runs on across the line through m[i] (unit normal
+    w[i] in the plane) that lies on its face's outline: a point PROBE x tol beyond the line, away
+    from the patch, lies in a patch of the same plane facing the same way. A wall modelled as
+    two quads split where a partition butts into it has the partition's foot on both quads'
+    outlines: that is a contact line (the wall runs on under the partition), not the crease
+    where a floor meets the wall's own edge."""
+    out = np.zeros(p.size, dtype=bool)
+    if p.size == 0:
+        return out
+    n = patches.normals[p]
+    away = np.sign(np.einsum("ij,ij->i", patches.corners[p].mean(axis=1) - m, w))
+    q = m - (away * PROBE * tol)[:, None] * w
+    lo, hi = patches.corners.min(axis=1) - tol, patches.corners.max(axis=1) + tol
+    i, j = box_pairs(q - tol, q + tol, lo, hi, cell)
+    h = np.einsum("ij,ij->i", q[i] - patches.corners[j, 0], n[i])
+    same = (np.abs(h) <= tol) & (np.einsum("ij,ij->i", patches.normals[j], n[i])
+                                 > constants.tol.parallel_cos)
+    i, j = i[same], j[same]
+    inside = inside_polygons(q[i], patches.corners[j], patches.normals[j])
+    out[i[inside]] = True
+    return out
+
+
 def _vertices_on_lines(scene, f, g, a, u, w, length, tol):
     """(V,) bool: vertices on a contact line with faces of its plane on both sides of it.
 
@@ -403,6 +395,12 @@ def _vertices_on_lines(scene, f, g, a, u, w, length, tol):
         np.logical_or.at(neg_side, group, side[e] < 0)
         on_line[key[pos_side & neg_side] // scene.n_faces] = True
     return on_line
+
+
+def no_contacts(scene, tol, min_gap=0.0):
+    """Contacts with no line (none found, or nowhere to look)."""
+    return Contacts(*_no_pairs(), np.zeros(scene.vertices.shape[0], dtype=bool), tol,
+                    min_gap=min_gap)
 
 
 def _no_pairs():

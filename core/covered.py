@@ -36,9 +36,9 @@ table still counts its power as emitted, and the exact emitters light from it).
 import numpy as np
 
 from . import constants
-from .contacts import GRID_CELLS, _box_pairs
+from .contacts import GRID_CELLS
 from .duplicates import NEAR_DUPLICATE_RTOL, find_duplicates
-from .geometry import unit_frames
+from .geometry import box_pairs, inside_polygons
 from .transfer import padded_polygons
 
 #: A patch's corners are tested this fraction of the way in towards its centre: the pieces cut
@@ -77,7 +77,7 @@ def covered_fronts(scene, patches, *, tol=None):
     fmin, fmax = polys.min(axis=1)[valid_f], polys.max(axis=1)[valid_f]
     size = np.sqrt(patches.areas[cand])
     cell = max(float(np.median(size)), diag / GRID_CELLS, tol)
-    pi, gi = _box_pairs(centre[cand] - tol, centre[cand] + tol, fmin - tol, fmax + tol, cell)
+    pi, gi = box_pairs(centre[cand] - tol, centre[cand] + tol, fmin - tol, fmax + tol, cell)
     pi, gi = cand[pi], valid_f[gi]
     n_p = patches.normals[pi]
     n_g = scene.face_normals[gi]
@@ -95,8 +95,9 @@ def covered_fronts(scene, patches, *, tol=None):
     points = centre[pi, None] + (1.0 - SHRINK) * (corners[pi] - centre[pi, None])
     points = np.concatenate([centre[pi, None], points], axis=1)           # (K, 5, 3)
     k = points.shape[1]
-    inside = _inside(points.reshape(-1, 3), np.repeat(polys[gi], k, axis=0),
-                     np.repeat(scene.face_normals[gi], k, axis=0)).reshape(-1, k).all(axis=1)
+    inside = inside_polygons(points.reshape(-1, 3), np.repeat(polys[gi], k, axis=0),
+                             np.repeat(scene.face_normals[gi], k, axis=0))
+    inside = inside.reshape(-1, k).all(axis=1)
     out[pi[inside]] = True
     return out
 
@@ -106,29 +107,6 @@ def _roots(scene):
     find_duplicates`), itself if it has none."""
     root = find_duplicates(scene, rtol=NEAR_DUPLICATE_RTOL)
     return np.where(root >= 0, root, np.arange(root.size))
-
-
-def _inside(points, polys, normals, margin=0.0):
-    """(K,) bool: ``points`` (K, 3) inside the planar polygons ``polys`` (K, n, 3) of unit
-    ``normals``, projected on the polygon's plane (crossing number; a padded polygon's
-    repeated corners add zero-length edges, which cross nothing), and farther than ``margin``
-    from every edge."""
-    u, v = unit_frames(normals)
-    rel = polys - points[:, None, :]
-    x, y = np.einsum("knj,kj->kn", rel, u), np.einsum("knj,kj->kn", rel, v)
-    x1, y1 = np.roll(x, -1, axis=1), np.roll(y, -1, axis=1)
-    straddles = (y > 0) != (y1 > 0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        at = x + (0.0 - y) * (x1 - x) / (y1 - y)
-    crossings = (straddles & (at > 0)).sum(axis=1)
-    inside = crossings % 2 == 1
-    if margin > 0.0:
-        dx, dy = x1 - x, y1 - y
-        length2 = dx * dx + dy * dy
-        t = np.clip(-(x * dx + y * dy) / np.where(length2 > 0, length2, 1.0), 0.0, 1.0)
-        near = ((x + t * dx) ** 2 + (y + t * dy) ** 2).min(axis=1) <= margin * margin
-        inside &= ~near
-    return inside
 
 
 class Covers:
@@ -164,7 +142,7 @@ class Covers:
         size = np.sqrt(np.asarray(scene.face_areas, dtype=np.float64)[valid])
         self.cell = max(float(np.median(size)) if size.size else 0.0, diag / GRID_CELLS,
                         self.tol, np.finfo(float).tiny)
-        a, b = _box_pairs(lo, hi, lo, hi, self.cell)
+        a, b = box_pairs(lo, hi, lo, hi, self.cell)
         ok = (a < b) & (np.einsum("ij,ij->i", normals[a], normals[b])
                         <= -constants.tol.parallel_cos)
         a, b = a[ok], b[ok]
@@ -197,13 +175,13 @@ class Covers:
         if not len(self) or points.shape[0] == 0:
             return out
         normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
-        pi, ci = _box_pairs(points, points, self.lo, self.hi, self.cell)
+        pi, ci = box_pairs(points, points, self.lo, self.hi, self.cell)
         ok = self.root[np.asarray(faces)[pi]] != self.root[self.face[ci]]
         ok &= np.einsum("ij,ij->i", normals[pi], self.normals[ci]) <= -constants.tol.parallel_cos
         ok &= np.abs(np.einsum("ij,ij->i", points[pi] - self.first[ci], self.normals[ci])) \
             <= self.tol
         pi, ci = pi[ok], ci[ok]
         if pi.size:
-            hit = _inside(points[pi], self.polys[ci], self.normals[ci], margin=self.tol)
+            hit = inside_polygons(points[pi], self.polys[ci], self.normals[ci], margin=self.tol)
             out[pi[hit]] = True
         return out

@@ -28,9 +28,8 @@ correction to its own solution (:meth:`Creases.incident`).
 import numpy as np
 
 from .constants import tol
-from .contacts import _box_pairs
 from .gather import shade
-from .geometry import patch_extents, within_crease
+from .geometry import box_pairs, patch_extents, within_crease
 
 #: A point counts as on the crease of an element when it lies within this fraction of the
 #: element's size (longest edge) of the element's plane: the share of its form factor to the
@@ -136,7 +135,7 @@ def find_creases(points, normals, rows, seen, *, crease_angle):
     if not cell > 0:                               # every item degenerate: nothing to read
         return empty
     pad = (DEPTH * size)[:, None]
-    u, e = _box_pairs(P, P, X.min(axis=1) - pad, X.max(axis=1) + pad, cell)
+    u, e = box_pairs(P, P, X.min(axis=1) - pad, X.max(axis=1) + pad, cell)
     h = np.einsum("ij,ij->i", P[u] - C[e], n_e[e])
     side = np.where(h >= 0, 1.0, -1.0)
     ok = (np.abs(h) <= DEPTH * size[e]) \
@@ -194,7 +193,7 @@ def _partners(P, N, u, e, side, foot, C, n_e, X, size, cell, on_plane):
     line = np.cross(N[u], side[:, None] * n_e[e])
     line /= np.maximum(np.linalg.norm(line, axis=1, keepdims=True), 1e-300)
     reach = (REACH * size[e])[:, None] * np.abs(line) + (DEPTH * size[e])[:, None]
-    c, v = _box_pairs(foot - reach, foot + reach, P, P, cell)
+    c, v = box_pairs(foot - reach, foot + reach, P, P, cell)
     n_side = side[c, None] * n_e[e[c]]
     off_own = np.einsum("ij,ij->i", P[v] - P[u[c]], N[u[c]])
     depth = DEPTH * size[e[c]]

@@ -19,7 +19,7 @@ import dataclasses
 import numpy as np
 
 from .constants import tol
-from .contacts import _box_pairs
+from .geometry import box_pairs
 
 #: Corners of two duplicate faces coincide within this fraction of the face size (sqrt area).
 DUPLICATE_RTOL = 1e-4
@@ -66,7 +66,7 @@ def find_duplicates(scene, *, rtol=DUPLICATE_RTOL):
     extent = np.ptp(centroid, axis=0).max()
     cell = max(2.0 * float(reach.max()), extent / 2.0**20, np.finfo(float).tiny)
     lo, hi = centroid - reach[:, None], centroid + reach[:, None]
-    i, j = _box_pairs(lo, hi, lo, hi, cell)
+    i, j = box_pairs(lo, hi, lo, hi, cell)
     keep = i < j
     i, j = i[keep], j[keep]
     fi, fj = valid[i], valid[j]

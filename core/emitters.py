@@ -15,8 +15,9 @@ shadow rays to points on the face, each weighted by the point-to-area kernel
 1989): first one ray to the face's anchor and one to each of its corners (``RIM``); where all
 of them are blocked the face is hidden (a lamp in the next room), else ``FIRST_ROUND`` rays
 more and, where they disagree (a penumbra), ``samples`` more. A face narrower than
-``min_size`` casts the anchor's ray only. The samples are a rank-1 lattice on the face's
-patches turned per point (Cranley-Patterson), so neighbouring points do not share one pattern.
+``min_size`` casts no more where the anchor's and the corners' rays are all clear. The samples
+are a rank-1 lattice on the face's patches turned per point (Cranley-Patterson), so
+neighbouring points do not share one pattern.
 
 The solve and the gathers then carry only what the emitters *reflect*: their emission enters as
 the first bounce, like a point light's (:class:`core.pipeline.Nodes`, ``exact``).
@@ -111,21 +112,19 @@ def exact_materials(scene, mode="all", resolution=64):
     ``AUTO_PIXELS`` pixels of a hemicube of ``resolution`` seen across the scene (width =
     area / longest edge, against the scene's largest extent).
     """
-    le = np.asarray(scene.emission, dtype=np.float64)
-    back = np.asarray(scene.back_materials()[1], dtype=np.float64)
-    emissive = np.any(le > 0, axis=1) | np.any(back > 0, axis=1)
+    emissive = scene.emissive_materials()
     real = scene.face_areas > 0
     if mode == "off":
-        return np.zeros(le.shape[0], dtype=bool)
+        return np.zeros(emissive.size, dtype=bool)
     if mode == "auto":
         width = lamp_widths(scene, real & emissive[scene.face_materials])
         extent = float(np.ptp(scene.vertices, axis=0).max()) if scene.vertices.size else 0.0
         wide = real & (width * resolution > AUTO_PIXELS * extent)
-        emissive &= np.bincount(scene.face_materials[wide], minlength=le.shape[0]) == 0
-    faces = np.bincount(scene.face_materials[real], minlength=le.shape[0])
+        emissive &= np.bincount(scene.face_materials[wide], minlength=emissive.size) == 0
+    faces = np.bincount(scene.face_materials[real], minlength=emissive.size)
     area = np.bincount(scene.face_materials[real], weights=scene.face_areas[real],
-                       minlength=le.shape[0])
-    out = np.zeros(le.shape[0], dtype=bool)
+                       minlength=emissive.size)
+    out = np.zeros(emissive.size, dtype=bool)
     total, total_area, limit = 0, 0.0, MAX_AREA_SHARE * float(area.sum())
     for m in np.argsort(np.where(emissive, faces, np.iinfo(np.int64).max), kind="stable"):
         if not emissive[m] or total + faces[m] > MAX_FACES or total_area + area[m] > limit:
@@ -419,13 +418,15 @@ class Emitters:
                           uvw[..., 1].reshape(-1, 1))
         return pts.reshape(uvw.shape[:2] + (3,))
 
-    def visible(self, e, origin, normals, k, turn, blocked):
+    def visible(self, e, origin, normals, k, turn, blocked, small=False):
         """Visible fraction (g,) of light ``e`` from ``origin`` (g, 3), kernel-weighted, and
         whether the ray to its anchor is clear (g,) bool.
 
         ``k``: rays where the first round disagrees (1: the anchor's ray only); ``turn``: (g,)
         angles per point; ``blocked(origin, direction)``: shadow rays ending at
-        origin + direction.
+        origin + direction. ``small``: a face narrower than the smallest element; where the
+        anchor's and the corners' rays are all clear it is seen whole, no more rays
+        (:data:`core.lights.SMALL_ROUND`).
         """
         q = self._slot[e]
         g = origin.shape[0]
@@ -450,7 +451,10 @@ class Emitters:
                         ).reshape(g, rim.shape[0])
         probe = centre + edge.sum(axis=1)
         frac = np.zeros(g)
-        seen = np.flatnonzero(probe > 0)            # the others see the lamp hidden
+        whole = probe == 1 + rim.shape[0]
+        frac[whole] = 1.0
+        # The others see the lamp hidden (or, narrower than an element, whole).
+        seen = np.flatnonzero((probe > 0) & ~(small & whole))
         if not seen.size:
             return frac, centre
         first, w1 = cast(seen, np.arange(FIRST_ROUND))

@@ -28,9 +28,9 @@ the other. A line that passes both and still is no boundary only costs the piece
 
 import numpy as np
 
-from .contacts import Contacts, _box_pairs, _clear_of_corners, _crossed, _unit
+from .contacts import Contacts, _clear_of_corners, _crossed, _unit, no_contacts
 from .exact import point_polygon_form_factor, ray_triangles
-from .geometry import ragged
+from .geometry import box_pairs, ragged
 from .lights import LUMA, spot_factor
 from .patches import connected_labels, triangle_mask
 from .raycast import any_hit, build_bvh
@@ -139,9 +139,7 @@ def _emissive_faces(scene):
     """The emissive faces whose corners are light points (all of them, or none when they have
     more than MAX_EMITTER_POINTS corners) and the lamp each belongs to (faces of one material
     linked through shared vertices); the number of lamps."""
-    le = np.asarray(scene.emission, dtype=np.float64)
-    back = np.asarray(scene.back_materials()[1], dtype=np.float64)
-    emissive = (np.any(le > 0, axis=1) | np.any(back > 0, axis=1))[scene.face_materials] \
+    emissive = scene.emissive_materials()[scene.face_materials] \
         & np.asarray(scene.face_valid, dtype=bool) & (scene.face_areas > 0)
     faces = np.flatnonzero(emissive)
     if faces.size == 0 or int(scene.face_sizes[faces].sum()) > MAX_EMITTER_POINTS:
@@ -392,15 +390,14 @@ def foot_lines(scene, patches, contacts, min_share=MIN_SHARE, min_element=None):
     tol = contacts.tol
     a, u, length, nl = shadow_lines(scene, patches, contacts, min_share, min_element)
     if a.shape[0] == 0:
-        return Contacts(np.zeros(0, dtype=np.int64), *(np.zeros((0, 3)),) * 3, np.zeros(0),
-                        np.zeros(scene.vertices.shape[0], dtype=bool), tol), 0
+        return no_contacts(scene, tol), 0
     w = _unit(np.cross(nl, u))
     # The patches each line crosses: same plane, boxes overlapping, crossed strictly.
     corners = np.asarray(patches.corners, dtype=np.float64)
     b = a + length[:, None] * u
-    li, pi = _box_pairs(np.minimum(a, b) - tol, np.maximum(a, b) + tol,
-                        corners.min(axis=1) - tol, corners.max(axis=1) + tol,
-                        max(float(np.median(np.sqrt(patches.areas))), tol))
+    li, pi = box_pairs(np.minimum(a, b) - tol, np.maximum(a, b) + tol,
+                       corners.min(axis=1) - tol, corners.max(axis=1) + tol,
+                       max(float(np.median(np.sqrt(patches.areas))), tol))
     pn = np.asarray(patches.normals)[pi]
     same = (np.einsum("ij,ij->i", pn, nl[li]) > 1.0 - 1e-9) \
         & (np.abs(np.einsum("ij,ij->i", corners[pi, 0] - a[li], nl[li])) <= tol)

@@ -30,9 +30,9 @@ Cutting up to a quarter of the patch's size (``GAP_SHARE``) is not adopted yet (
 import numpy as np
 
 from . import constants
-from .contacts import (Contacts, _box_pairs, _clear_of_corners, _crossed, _lines_of,
-                       contact_segments, face_boxes)
-from .geometry import ragged
+from .contacts import (Contacts, _clear_of_corners, _crossed, _lines_of, contact_segments,
+                       face_boxes, no_contacts)
+from .geometry import box_pairs, ragged
 from .patches import triangle_mask
 
 #: A gap line cuts no patch where it would cross an edge nearer its ends than this fraction of
@@ -75,8 +75,7 @@ def gap_lines(scene, patches, gap, *, tol=None, back_open=None):
     """
     if tol is None:
         tol = constants.tol.contact * scene.bounding_diagonal()
-    none = Contacts(np.zeros(0, dtype=np.int64), *(np.zeros((0, 3)),) * 3, np.zeros(0),
-                    np.zeros(scene.vertices.shape[0], dtype=bool), tol, min_gap=NEEDLE)
+    none = no_contacts(scene, tol, min_gap=NEEDLE)
     gap = float(gap)
     if not gap > tol or patches.n_patches == 0:
         return none, 0
@@ -89,16 +88,14 @@ def gap_lines(scene, patches, gap, *, tol=None, back_open=None):
     # exact direct light integrates each lamp over its own pieces (tests/core/test_fuzz.py: a
     # panel 10 cm over a box, cut along the box's side, let 16 % of its power escape a closed
     # room).
-    front, back = scene.emission, scene.back_materials()[1]
-    lamp = np.any(np.asarray(front) > 0, axis=1) | np.any(np.asarray(back) > 0, axis=1)
-    receives = ~lamp[np.asarray(patches.material)]
+    receives = ~scene.emissive_materials()[np.asarray(patches.material)]
     if valid_f.size == 0 or not receives.any():
         return none, 0
     fmin, fmax = (box[valid_f] for box in face_boxes(scene))
     reach = np.maximum(gap, GAP_SHARE * size)
     cell = max(float(np.median(size)), gap)
-    pi, gi = _box_pairs(corners.min(axis=1) - reach[:, None], corners.max(axis=1)
-                        + reach[:, None], fmin, fmax, cell)
+    pi, gi = box_pairs(corners.min(axis=1) - reach[:, None], corners.max(axis=1)
+                       + reach[:, None], fmin, fmax, cell)
     gi = valid_f[gi]
     keep = (gi != face[pi]) & receives[pi]
     pi, gi = pi[keep], gi[keep]

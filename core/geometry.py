@@ -217,6 +217,29 @@ def unit_frames(d):
     return e1, np.cross(d, e1)
 
 
+def inside_polygons(points, polys, normals, margin=0.0):
+    """(K,) bool: ``points`` (K, 3) inside the planar polygons ``polys`` (K, n, 3) of unit
+    ``normals``, projected on the polygon's plane (crossing number; a padded polygon's
+    repeated corners add zero-length edges, which cross nothing), and farther than ``margin``
+    from every edge."""
+    u, v = unit_frames(normals)
+    rel = polys - points[:, None, :]
+    x, y = np.einsum("knj,kj->kn", rel, u), np.einsum("knj,kj->kn", rel, v)
+    x1, y1 = np.roll(x, -1, axis=1), np.roll(y, -1, axis=1)
+    straddles = (y > 0) != (y1 > 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        at = x + (0.0 - y) * (x1 - x) / (y1 - y)
+    crossings = (straddles & (at > 0)).sum(axis=1)
+    inside = crossings % 2 == 1
+    if margin > 0.0:
+        dx, dy = x1 - x, y1 - y
+        length2 = dx * dx + dy * dy
+        t = np.clip(-(x * dx + y * dy) / np.where(length2 > 0, length2, 1.0), 0.0, 1.0)
+        near = ((x + t * dx) ** 2 + (y + t * dy) ** 2).min(axis=1) <= margin * margin
+        inside &= ~near
+    return inside
+
+
 def triangulate_polygon(points, normal):
     """Ear-clipping triangulation of one simple polygon in its plane.
 
@@ -376,3 +399,43 @@ def unique_rows(keys):
     inverse = np.empty(m, dtype=np.int64)
     inverse[order] = np.cumsum(new) - 1
     return order[new].astype(np.int64), inverse
+
+
+def box_pairs(lo_a, hi_a, lo_b, hi_b, cell):
+    """Pairs (i, j) of boxes a_i, b_j (any dimension) that overlap, found through a uniform grid.
+
+    Each box is entered in the cells of side ``cell`` it covers; pairs sharing a cell are
+    candidates, kept once, and checked for overlap. Cost ~ the number of (box, cell) entries,
+    not len(a) x len(b).
+    """
+    if lo_a.shape[0] == 0 or lo_b.shape[0] == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    origin = np.minimum(lo_a.min(axis=0), lo_b.min(axis=0))
+    dim = lo_a.shape[1]
+
+    def cells(lo, hi):
+        c0 = np.floor((lo - origin) / cell).astype(np.int64)
+        c1 = np.floor((hi - origin) / cell).astype(np.int64)
+        extent = c1 - c0 + 1
+        owner, local, _ = ragged(np.prod(extent, axis=1))
+        key = np.zeros(owner.size, dtype=np.int64)
+        rest = local
+        for axis in range(dim - 1, -1, -1):
+            e = extent[owner, axis]
+            key = key + (c0[owner, axis] + rest % e) * (np.int64(1) << (21 * axis))
+            rest = rest // e
+        return owner, key
+
+    oa, ka = cells(lo_a, hi_a)
+    ob, kb = cells(lo_b, hi_b)
+    order = np.argsort(ka, kind="stable")
+    ka, oa = ka[order], oa[order]
+    first = np.searchsorted(ka, kb, side="left")
+    count = np.searchsorted(ka, kb, side="right") - first
+    jb, local, _ = ragged(count)
+    ia = oa[first[jb] + local]
+    jb = ob[jb]
+    key = np.unique(ia * np.int64(lo_b.shape[0]) + jb)
+    ia, jb = key // lo_b.shape[0], key % lo_b.shape[0]
+    ok = np.all((lo_a[ia] <= hi_b[jb]) & (hi_a[ia] >= lo_b[jb]), axis=1)
+    return ia[ok], jb[ok]

@@ -82,6 +82,12 @@ class Scene:
         le = self.emission if self.back_emission is None else self.back_emission
         return rho, le
 
+    def emissive_materials(self):
+        """(M,) bool: the materials that emit from their front or their back."""
+        front = np.asarray(self.emission, dtype=np.float64)
+        back = np.asarray(self.back_materials()[1], dtype=np.float64)
+        return np.any(front > 0, axis=1) | np.any(back > 0, axis=1)
+
     @property
     def n_faces(self):
         return int(self.face_starts.shape[0])

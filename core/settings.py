@@ -348,7 +348,8 @@ TABLE = (
             "shadows", low=1, high=1024, soft=(1, 256), exposed=True,
             doc="Points whose first round (8 rays on a ring near the light's rim, 1 to its "
                 "centre) agrees, fully lit or fully shadowed, cast no more: only the penumbra "
-                "pays for the samples; a light narrower than min_element casts 1 (core.lights). "
+                "pays for the samples; a light narrower than min_element casts 4 on the ring "
+                "first (core.lights.SMALL_ROUND). "
                 "The visible fraction's error must stay under the mesh's contrast, or the mesh "
                 "refines its noise: across a disk light's straight shadow edge the worst point "
                 "is off by 12.2 % of the unshadowed light with 16 rays, 7.4 % with 32, 5.0 % "

@@ -192,7 +192,7 @@ def ours_direct(case, points, normals):
     from core.scene import make_scene
 
     scene = make_scene(**room_arrays(), lights=CASES[case])
-    direct = DirectLight(scene.lights, make_patches(scene, 0.25), min_size=1.0)
+    direct = DirectLight(scene.lights, make_patches(scene, 0.25), samples=1)
     return np.pi * direct.incident(points + LIFT * normals, normals)
 
 
