@@ -115,6 +115,18 @@ class _Polys:
         self.polys.append(list(range(base, base + len(points))))
         self.mats.append(material)
 
+    def room(self, plan, height, wall_material=lambda i: 0):
+        """A closed room over ``plan`` (n, 2), counter-clockwise about +z: floor (normal up)
+        and ceiling (down) of material 0, wall i (from corner i, normal inwards) of
+        ``wall_material(i)``."""
+        n = len(plan)
+        self.add(np.c_[plan, np.zeros(n)], 0)
+        self.add(np.c_[plan[::-1], np.full(n, height)], 0)
+        for i in range(n):
+            (x0, y0), (x1, y1) = plan[i], plan[(i + 1) % n]
+            self.add([[x0, y0, 0], [x0, y0, height], [x1, y1, height], [x1, y1, 0]],
+                     wall_material(i))
+
     def box(self, lo, hi, material, top=None):
         """Closed box [lo, hi], outward normals; its top face gets ``top`` if given."""
         (x0, y0, z0), (x1, y1, z1) = lo, hi
@@ -161,13 +173,8 @@ def rooms(draw, emitters=("panel", "box_top", "wall"), clear=False, standing=Non
     H = draw(st.floats(2.0, 3.5))
     emitter = draw(st.sampled_from(emitters))
     out = _Polys()
-    out.add(np.c_[plan, np.zeros(n)], 0)                      # floor, normal up
-    out.add(np.c_[plan[::-1], np.full(n, H)], 0)              # ceiling, normal down
     lit_wall = draw(st.integers(0, n - 1))
-    for i in range(n):                                        # walls, normals inwards
-        (x0, y0), (x1, y1) = plan[i], plan[(i + 1) % n]
-        out.add([[x0, y0, 0], [x0, y0, H], [x1, y1, H], [x1, y1, 0]],
-                2 if emitter == "wall" and i == lit_wall else 0)
+    out.room(plan, H, lambda i: 2 if emitter == "wall" and i == lit_wall else 0)
     r = _inradius(plan) / np.sqrt(2.0)      # the square [-r, r]^2 lies inside the floor
     n_boxes = draw(st.integers(1 if emitter == "box_top" or standing else 0, 2))
     slot = 2 * r / max(n_boxes, 1)
@@ -372,11 +379,7 @@ def test_a_box_top_just_under_a_small_panel_loses_no_power():
     ang = 2 * np.pi * np.arange(7) / 7 + 0.3
     plan, H = np.c_[np.cos(ang), np.sin(ang)], 2.0
     polys = _Polys()
-    polys.add(np.c_[plan, np.zeros(7)], 0)
-    polys.add(np.c_[plan[::-1], np.full(7, H)], 0)
-    for i in range(7):
-        (x0, y0), (x1, y1) = plan[i], plan[(i + 1) % 7]
-        polys.add([[x0, y0, 0], [x0, y0, H], [x1, y1, H], [x1, y1, 0]], 0)
+    polys.room(plan, H)
     polys.box((-0.32, 0.0, 0.5), (0.32, 0.32, 1.4), 1)
     s = 0.19
     polys.add([[-s, -s, 1.5], [-s, s, 1.5], [s, s, 1.5], [s, -s, 1.5]], 2)
@@ -449,11 +452,7 @@ def _l_room_with_a_box():
     floor."""
     plan = np.array([[-0.5, -0.5], [1.5, -0.5], [1.5, 0.5], [0.5, 0.5], [0.5, 1.5], [-0.5, 1.5]])
     polys = _Polys()
-    polys.add(np.c_[plan, np.zeros(6)], 0)
-    polys.add(np.c_[plan[::-1], np.full(6, 2.0)], 0)
-    for i in range(6):
-        (x0, y0), (x1, y1) = plan[i], plan[(i + 1) % 6]
-        polys.add([[x0, y0, 0], [x0, y0, 2.0], [x1, y1, 2.0], [x1, y1, 0]], 0)
+    polys.room(plan, 2.0)
     polys.box((-0.17677669529663687, -6.103515625e-05, 0.0),
               (0.17677669529663687, 0.17674617771851187, 1.0), 1, top=2)
     return polys
@@ -538,11 +537,7 @@ def _heptagon_room():
     angle = 2 * np.pi * np.arange(7) / 7
     polys = _Polys()
     plan = np.stack([2.0 * np.cos(angle), 2.0 * np.sin(angle)], axis=1)
-    polys.add(np.c_[plan, np.zeros(7)], 0)
-    polys.add(np.c_[plan[::-1], np.full(7, 3.0)], 0)
-    for i in range(7):
-        (x0, y0), (x1, y1) = plan[i], plan[(i + 1) % 7]
-        polys.add([[x0, y0, 0], [x0, y0, 3.0], [x1, y1, 3.0], [x1, y1, 0]], 0)
+    polys.room(plan, 3.0)
     polys.box((-0.7, -0.4, 0.0), (0.7, 0.0, 0.6), 1)
     polys.add([[-0.3, 0.3, 2.9], [-0.3, 0.7, 2.9], [0.3, 0.7, 2.9], [0.3, 0.3, 2.9]], 2)
     return polys
