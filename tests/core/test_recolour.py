@@ -10,11 +10,12 @@ import dataclasses
 import numpy as np
 import pytest
 
+from core import emitters as emitters_module
 from core import lights as lights_module
 from core.bake import bake, relight
 from core.light_list import make_lights
 from core.settings import BakeSettings
-from core.shadow_memo import ShadowMemo, point_keys
+from core.shadow_memo import PointTable, ShadowMemo, point_keys
 
 from test_emitters import _room
 
@@ -90,6 +91,34 @@ def test_lights_relit_alone_add_up_to_the_bake_on_its_mesh(monkeypatch, shadow_c
                for p in parts)
 
 
+@pytest.mark.parametrize("keep", [True, False])
+def test_a_relight_reads_the_emitters_contour_integrals_back(monkeypatch, keep):
+    # The exact emitters' unshadowed light (contour integrals at the points, and the near
+    # patches' means) depends on the geometry alone: a relight of the lamp's colour reads it
+    # back from the bake and still equals a fresh bake. With no bytes to keep it (or counted
+    # wrongly) it is integrated again, and the counter shows it.
+    if not keep:
+        monkeypatch.setattr(emitters_module, "KEEP_BYTES", 0)
+    s = BakeSettings(output_mode="vertices", element_levels=0, exact_direct="all")
+    base = bake(_scene([BULB]), s)
+    calls = []
+    for name in ("point_polygon_form_factor", "pair_form_factor"):
+        def counted(*args, _f=getattr(emitters_module, name), _name=name):
+            calls.append(_name)
+            return _f(*args)
+        monkeypatch.setattr(emitters_module, name, counted)
+    lamp = [2.0, 1.0, 0.25]
+    again = relight(base, emission=_scene([BULB], lamp).emission)
+    if keep:
+        assert calls.count("point_polygon_form_factor") == 0
+    else:
+        assert calls.count("point_polygon_form_factor") > 0
+    assert calls.count("pair_form_factor") == 0      # the near means: kept for the patches
+    np.testing.assert_allclose(again.corner_colours, bake(_scene([BULB], lamp), s).corner_colours,
+                               rtol=1e-9, atol=1e-15)
+    assert not np.allclose(again.corner_colours, base.corner_colours, rtol=0.02)
+
+
 def test_memo_finds_what_it_kept_and_nothing_else():
     rng = np.random.default_rng(3)
     pts, nrm = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
@@ -118,6 +147,26 @@ def test_memo_finds_what_it_kept_and_nothing_else():
     small = ShadowMemo(2, budget=1000)
     small.add(rows, keys, 16, frac, frac > 0.5)
     assert small.full and np.all(small.find(rows, keys, 16) == -1)
+
+
+def test_a_lazy_table_sorts_once_its_new_points_are_as_many_as_the_sorted():
+    # A bake asks the emitters' table chunk after chunk of new points: a lazy find sorts the
+    # points added since the last sort in only when they are as many as the sorted ones
+    # (amortised), and the sort before a relight finds them all.
+    rng = np.random.default_rng(5)
+    pts, nrm = rng.normal(size=(30, 3)), rng.normal(size=(30, 3))
+    rows, keys = point_keys(pts, nrm, 0)
+    table = PointTable([(2, np.float64)], budget=1 << 20)
+    values = rng.uniform(size=(30, 2))
+    table.add(rows[:10], keys[:10], 0, values[:10])
+    assert np.all(table.find(rows, keys, 0, lazy=True)[:10] >= 0)      # 10 new, 0 sorted
+    table.add(rows[10:15], keys[10:15], 0, values[10:15])
+    at = table.find(rows, keys, 0, lazy=True)
+    assert np.all(at[:10] >= 0) and np.all(at[10:] == -1)                # 5 new, 10 sorted
+    table.sort()
+    at = table.find(rows, keys, 0, lazy=True)
+    np.testing.assert_array_equal(table.values[0][at[:15]], values[:15])
+    assert np.all(at[15:] == -1)
 
 
 @pytest.mark.parametrize("field, value", [("position", [[2.0, 1.2, 2.4], [1.0, 3.0, 2.6]]),
