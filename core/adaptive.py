@@ -17,8 +17,7 @@ leaves are split where
   the leaf is larger than ``CONTACT_ELEMENT`` x ``min_element``;
 
 (the criteria and their constants: :mod:`core.criteria`), never below ``min_element`` and
-within ``vertex_budget`` points, worst first (score: the leaf's
-area times how far it is over the threshold).
+within ``vertex_budget`` points, worst first (score: area times how far over the threshold).
 
 The output is the conforming triangulation of the leaves (``tree.conforming()``): every output
 corner gathers as a corner of that triangulation, seen as a scene of its own (the leaves'
@@ -223,8 +222,9 @@ class _Cache:
 
     def rows_for(self, ids):
         """A RowStore whose group g is cache entry ``ids[g]`` (``ids`` distinct; entries never
-        gathered get no row: their incident light is zero). Empties the cache's rows."""
-        store = RowStore(ids.size, self.n_nodes)
+        gathered get no row: their incident light is zero). Empties the cache's rows. A half
+        store (:data:`core.rows.HALF_SHIFT`): the rows weigh one bounce, are never solved."""
+        store = RowStore(ids.size, self.n_nodes, half=True)
         pos = np.full(self.keys.shape[0], -1, dtype=np.int64)
         pos[ids] = np.arange(ids.size)
         # The cache's batches are handed over (a batch whose rows are all kept is not copied)
@@ -456,13 +456,14 @@ def adaptive_output(scene, settings, patches, node_radiance, incident, *, contac
     u_ids, entry = np.unique(ids, return_inverse=True)
     entry = entry.reshape(-1)
     rows = cache.rows_for(u_ids)
+    cache.incident[u_ids] = rows.incident(seen_L) + cache.direct[u_ids]   # as a relight reads
     material = cache.keys[u_ids, 1].astype(np.int64)
     creases = find_creases(cache.points[u_ids], cache.normals[u_ids], rows, seen,
                            crease_angle=settings.crease_angle)
     if len(creases):
         cache.incident[u_ids] = creases.incident(scene, material, cache.incident[u_ids], seen_L)
-        corner_value, corner_inc = corner_values(scene, leaf_scene.corner_verts, groups,
-                                                 cache.incident[ids])
+    corner_value, corner_inc = corner_values(scene, leaf_scene.corner_verts, groups,
+                                             cache.incident[ids])
     mesh = output_mesh(scene, tree, conf, corner_value)
     corner_entry = np.zeros(leaf_scene.n_corners, dtype=np.int64)
     corner_entry[ok] = entry[groups.group[ok]]

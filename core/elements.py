@@ -53,7 +53,7 @@ class Elements:
         rest copy their patch's side).
     rows : core.rows.RowStore
         Point-to-node form factors (against the solved patches' 2P nodes) of ``computed``, in
-        that order.
+        that order; a half store (:data:`core.rows.HALF_SHIFT`), as is ``near_rows``.
     levels : list of dict
         Per level: ``split`` (patches or elements split) and ``elements`` (count after it).
     direct : (K, 3) float64 or None
@@ -254,7 +254,7 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
     # Rows kept in the order of ``computed`` (the store's row keys are positions in it).
     E = parent.size
     computed = np.concatenate([k[0] + k[1] * E for k in kept]) if kept else np.zeros(0, np.int64)
-    store = RowStore(computed.size, 2 * P)
+    store = RowStore(computed.size, 2 * P, half=True)
     start = 0
     for ids, _, cols, vals, _ in kept:
         store.add_compact(np.arange(start, start + ids.size), cols, vals)
@@ -278,7 +278,7 @@ def _near_rows(el, *, resolution, rotate, rng, batch, monitor, start):
     near = np.flatnonzero(near_surfaces(el.patches)[el.computed % el.parent.size])
     near = near[spatial_order(centres[near])]
     far_field = el.far_field
-    store = RowStore(near.size, far_field.n_cols)
+    store = RowStore(near.size, far_field.n_cols, half=True)
     jobs = [np.arange(b, min(b + batch, near.size)) for b in range(0, near.size, batch)]
 
     def begin(keys):
