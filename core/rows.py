@@ -101,15 +101,14 @@ def encode_half(vals):
     return bits.astype(np.uint16)
 
 
-def decode_half(codes, dtype=np.float64, scaled=True):
-    """The values of :func:`encode_half`'s ``codes`` as ``dtype``; ``scaled=False``: times
-    2^-HALF_SHIFT (float64; the caller scales a product once)."""
+def decode_half(codes, scaled=True):
+    """Float64 values of :func:`encode_half`'s ``codes``; ``scaled=False``: times
+    2^-HALF_SHIFT (the caller scales a product once)."""
     bits = codes.astype(np.uint32)
     bits <<= 12
     out = bits.view(np.float32).astype(np.float64)
     if scaled:
         out *= 2.0 ** HALF_SHIFT
-        return out.astype(dtype, copy=False)
     return out
 
 
@@ -242,13 +241,11 @@ class RowStore:
         """(n_rows, 3): ``sum_j F(key -> j) L_j`` for every stored row (zero elsewhere)."""
         out = np.zeros((self.n_rows, 3))
         L = np.asarray(node_radiance, dtype=np.float64)
-        if not self.half:
-            for keys, cols, vals in self.batches:
-                out[keys] = vals.astype(np.float64) @ L[cols]
-            return out
         for keys, cols, vals in self.batches:
-            out[keys] = decode_half(vals, scaled=False) @ L[cols]
-        out *= (2.0 ** HALF_SHIFT) * self.scale[:, None]
+            v = decode_half(vals, scaled=False) if self.half else vals.astype(np.float64)
+            out[keys] = v @ L[cols]
+        if self.half:
+            out *= (2.0 ** HALF_SHIFT) * self.scale[:, None]
         return out
 
     def assemble(self, row_keys, col_nodes, dtype, monitor=None):
