@@ -2,11 +2,13 @@
 
 For each sample: the bake (radiosity.bake with the file's own settings), then a Relight after
 every emissive material's strength and every light's power x 2 (one new solve on the kept form
-factors, and the lights' own solution once), the first change of the first group (its own
-solution, once: a solve for a material, a cast for a light), a second one (a weighted sum, no
-solve), the first change of a point, spot or sun light's group (``group_light_first_s``: that
-light cast alone, when the scene has two lights or more) and the bytes the kept bake holds in
-memory (radiosity_addon.relight.kept_bytes).
+factors, and the lights' own solution once), the first change of the first group (every
+group's own solution, once, in one core.relight_many: a material's emission alone, a light
+alone), a second one (a weighted sum, no solve), the first change of a point, spot or sun
+light's group (``group_light_first_s``: made with the first, a weighted sum), every group's own
+solution made again from none one core.relight at a time and then together
+(``groups_one_by_one_s``, ``groups_together_s``: the ratio in one run) and the bytes the kept
+bake holds in memory (radiosity_addon.relight.kept_bytes).
 
 ``--scenes generated --patches 10000``: instead of a sample, an open-plan office built here
 (:func:`generated`: desks, four point lights, a spot, emissive ceiling panels) baked to vertices
@@ -173,6 +175,7 @@ def run(name, patches=10000, exact_direct=None):
         t0 = time.perf_counter()
         groups[lights[0]].strength = 0.5
         extra["group_light_first_s"] = round(time.perf_counter() - t0, 3)
+    extra.update(_every_group(relight, entry))
     return dict(scene=name, bake_s=round(bake, 2),
                 bake_core_s=round(report["timings"]["total"], 2),
                 bake_solve_s=round(report["timings"].get("solve", 0.0), 3), **extra,
@@ -182,6 +185,25 @@ def run(name, patches=10000, exact_direct=None):
                     report["form_factor_bytes"] / 2 ** 20, 2),
                 kept_mb=round(relight.kept_bytes(entry) / 2 ** 20, 2),
                 group_seconds={k: round(v, 3) for k, v in entry.seconds.items()})
+
+
+def _every_group(relight, entry):
+    """Seconds to make every group's own solution from none: one core.relight at a time (as
+    before core.relight_many), then all in one core.relight_many (the add-on's way)."""
+    import numpy as np
+    weights = {g: np.full(3, 0.5) for g in relight.group_names(entry)}
+    out, prefetch = {}, relight._prefetch
+    for label, together in (("one_by_one", False), ("together", True)):
+        entry.basis, entry.own, entry.lit, entry.world = {}, {}, None, None
+        if not together:
+            relight._prefetch = lambda entry, ks: None
+        try:
+            t0 = time.perf_counter()
+            relight._mixed(entry, weights)
+            out[f"groups_{label}_s"] = round(time.perf_counter() - t0, 3)
+        finally:
+            relight._prefetch = prefetch
+    return out
 
 
 def main():

@@ -5,6 +5,7 @@ are re-exported here; see README.md for a runnable example and docs/design.md fo
 """
 
 from .bake import BakeResult, bake, form_factor_matrix, relight
+from .groups import relight_many
 from .errors import BakeCancelled, RadiosityError, SceneError, SettingsError
 from .light_list import Lights, make_lights
 from .outmesh import OutputMesh
@@ -17,6 +18,6 @@ __all__ = [
     "BakeCancelled", "RadiosityError", "SceneError", "SettingsError",
     "Lights", "make_lights", "Photometry", "read_photometry",
     "OutputMesh", "Scene", "make_scene", "scene_from_polygons",
-    "BakeResult", "BakeSettings", "bake", "form_factor_matrix", "relight",
+    "BakeResult", "BakeSettings", "bake", "form_factor_matrix", "relight", "relight_many",
     "Sky", "CIEOvercast", "Environment", "Uniform", "zenith_radiance",
 ]

@@ -340,7 +340,9 @@ def relight(result, *, reflectance=None, emission=None, back_emission=None, ligh
                         cancel=cancel)
 
 
-def _relight(result, *, reflectance, emission, back_emission, lights, progress, cancel):
+def _prepare(result, *, reflectance, emission, back_emission, lights, progress, cancel):
+    """(the bake's state with the new direct light, the new scene, the relight's start time,
+    or None and the result of a new bake when the shadow lines moved) of :func:`relight`."""
     if not isinstance(result, BakeResult) or not isinstance(result._state, _State):
         raise TypeError(f"result must be a BakeResult from bake(); got {type(result).__name__}")
     state = result._state
@@ -377,8 +379,7 @@ def _relight(result, *, reflectance, emission, back_emission, lights, progress, 
         again.report.setdefault("warnings", []).append(
             "relight: the shadow lines (Cut at Shadows) moved with the new lights, so the "
             "scene was baked again (form factors not reused)")
-        return again
-    monitor = Monitor(progress, cancel)
+        return None, new_scene, None, again
     t_start = time.perf_counter()
     st = state.settings
     if "lights" in changes or (("emission" in changes or "back_emission" in changes) and (
@@ -391,6 +392,15 @@ def _relight(result, *, reflectance, emission, back_emission, lights, progress, 
         direct = recoloured(state, new_scene)
         gather = None if direct is None else regathered(state.gather, state.direct, direct)
         state = dataclasses.replace(state, direct=direct, gather=gather)
+    return state, new_scene, t_start, None
+
+
+def _relight(result, *, progress, cancel, **changes):
+    state, new_scene, t_start, again = _prepare(result, progress=progress, cancel=cancel,
+                                                **changes)
+    if again is not None:
+        return again
+    monitor, st = Monitor(progress, cancel), state.settings
     with parallel.using(st.workers, cancel):
         if state.store is None:     # a matrix-free bake kept no form factors
             monitor.stage(*_STAGES["patches"])
@@ -429,13 +439,30 @@ def _lines_moved(state, new_scene):
 
 def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_contact=None,
          contact_lines=None, warnings=()):
-    """Form factors (reusing ``kept``'s rows), solve, colours: the stages of core.pipeline.
+    """Form factors (reusing ``kept``'s rows), solve, colours: the stages of core.pipeline
+    (:func:`_front`, the solve, :func:`_back`; core.groups runs them apart).
 
     ``timings`` and ``warnings`` are what came before (patches); the result's report holds
     them followed by this run's.
     """
+    direct, nodes, ff, sky, more = _front(scene, settings, patches, monitor, kept)
+    timings = dict(timings, **more)
+    monitor.stage(*_STAGES["solve"])
+    monitor.update(0.0, "solving")
+    t0 = time.perf_counter()
+    sol = solve(ff, nodes, settings, monitor, kept.balance if kept is not None else None)
+    monitor.update(1.0, "solved")
+    timings["solve"] = time.perf_counter() - t0
+    memory.mark("solve")
+    return _back(scene, settings, patches, monitor, t_start, timings, kept, on_contact,
+                 contact_lines, warnings, direct, nodes, ff, sky, sol)
+
+
+def _front(scene, settings, patches, monitor, kept):
+    """The lights and the form factors of :func:`_run`: (direct light, Nodes, FormFactors,
+    directional sky or None, {stage: seconds})."""
     P = len(patches.areas)
-    timings = dict(timings)
+    timings = {}
     t0 = time.perf_counter()
     direct = kept.direct if kept is not None else None
     if direct is None:
@@ -472,15 +499,13 @@ def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_c
         timings["form_factors"] = time.perf_counter() - t0
         memory.mark("form_factors")
     nodes = with_world(nodes, ff.store.row_sums, scene.world, ff.store.sky)
+    return direct, nodes, ff, sky, timings
 
-    monitor.stage(*_STAGES["solve"])
-    monitor.update(0.0, "solving")
-    t0 = time.perf_counter()
-    sol = solve(ff, nodes, settings, monitor, kept.balance if kept is not None else None)
-    monitor.update(1.0, "solved")
-    timings["solve"] = time.perf_counter() - t0
-    memory.mark("solve")
 
+def _back(scene, settings, patches, monitor, t_start, timings, kept, on_contact, contact_lines,
+          warnings, direct, nodes, ff, sky, sol):
+    """The colours and the report of :func:`_run`: the BakeResult."""
+    P = len(patches.areas)
     with blas.one_thread():           # the gathers: as the form factors
         monitor.stage(*_STAGES["colours"])
         monitor.update(0.0, "colours")

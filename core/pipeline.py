@@ -36,7 +36,7 @@ from .reciprocity import asymmetry, make_reciprocal, rebalance
 from .rows import (RECIPROCAL_METHODS, Batcher, RowStore, discover, row_function, row_seconds,
                    split_rows)
 from .sky import is_directional
-from .solvers import (matvec, solve_direct, solve_gauss_seidel, solve_jacobi,
+from .solvers import (matvec, solve_direct, solve_gauss_seidel_many, solve_jacobi,
                       solve_progressive)
 
 #: 'auto' solves directly (LU, exact) up to this many active nodes, block Gauss-Seidel above.
@@ -342,24 +342,36 @@ def solve(ff, nodes, settings, monitor, kept=None):
     """Solve the radiosity system of the active nodes (dense, or matrix-free if too big).
 
     ``kept``: the :class:`KeptBalance` of an earlier solve on these form factors (relight),
-    reused when it :meth:`~KeptBalance.fits`.
+    reused when it :meth:`~KeptBalance.fits`. :func:`solve_many`: several emissions at once.
     """
+    return solve_many(ff, [nodes], settings, monitor, kept)[0]
+
+
+def solve_many(ff, nodes_list, settings, monitor, kept=None):
+    """:func:`solve` for each :class:`Nodes` of ``nodes_list`` (the same nodes and reflectance,
+    lit apart: a relight of several light groups): the dense matrix is assembled and balanced
+    once, and Gauss-Seidel sweeps every emission together."""
     idx = np.flatnonzero(ff.active)
     solver, warnings = choose_solver(settings, len(idx), ff.overflow)
     if solver == "progressive_free":
-        sol = _solve_matrix_free(ff, nodes, settings, monitor)
+        sols = [_solve_matrix_free(ff, nodes, settings, monitor) for nodes in nodes_list]
     else:
-        sol = _solve_dense(ff, nodes, settings, solver, monitor, kept)
-    if not sol.result.converged:
-        r = sol.result
-        warnings.append(f"solver '{r.solver}' stopped after {r.iterations} iterations at "
-                        f"residual {r.residual:.3g} > tolerance {settings.tolerance:g} x (1 - max "
-                        "reflectance)")
-    return dataclasses.replace(sol, warnings=warnings + sol.warnings)
+        sols = _solve_dense(ff, nodes_list, settings, solver, monitor, kept)
+    out = []
+    for sol in sols:
+        more = []
+        if not sol.result.converged:
+            r = sol.result
+            more.append(f"solver '{r.solver}' stopped after {r.iterations} iterations at "
+                        f"residual {r.residual:.3g} > tolerance {settings.tolerance:g} x (1 - "
+                        "max reflectance)")
+        out.append(dataclasses.replace(sol, warnings=warnings + more + sol.warnings))
+    return out
 
 
-def _solve_dense(ff, nodes, settings, solver, monitor, kept=None):
-    store, rho, le, areas = ff.store, nodes.rho, nodes.source, nodes.areas
+def _solve_dense(ff, nodes_list, settings, solver, monitor, kept=None):
+    store, nodes = ff.store, nodes_list[0]
+    rho, areas = nodes.rho, nodes.areas
     N = len(areas)
     idx = np.flatnonzero(ff.active)
     n_a = len(idx)
@@ -382,39 +394,44 @@ def _solve_dense(ff, nodes, settings, solver, monitor, kept=None):
     black_block = store.assemble(idx, black, np.float32, monitor) if len(black) else None
     matrix_bytes = F.nbytes + (black_block.nbytes if black_block is not None else 0)
     common = dict(tol=settings.tolerance, monitor=monitor)
-    if solver == "direct":
-        res = solve_direct(F, rho[idx], le[idx], monitor=monitor)
+    les = [n.source[idx] for n in nodes_list]
+    if solver == "gauss_seidel":
+        results = solve_gauss_seidel_many(F, rho[idx], les,
+                                          max_iterations=settings.max_iterations, **common)
+    elif solver == "direct":
+        results = [solve_direct(F, rho[idx], le, monitor=monitor) for le in les]
     elif solver == "jacobi":
-        res = solve_jacobi(F, rho[idx], le[idx], max_iterations=settings.max_iterations,
-                           **common)
-    elif solver == "gauss_seidel":
-        res = solve_gauss_seidel(F, rho[idx], le[idx], max_iterations=settings.max_iterations,
-                                 **common)
+        results = [solve_jacobi(F, rho[idx], le, max_iterations=settings.max_iterations,
+                                **common) for le in les]
     else:
-        res = solve_progressive(None, areas[idx], rho[idx], le[idx], F=F,
-                                max_shots=settings.max_iterations * max(n_a, 1), **common)
-    L = res.radiance
-    node_radiance = np.zeros((N, 3))
-    node_radiance[idx] = L
+        results = [solve_progressive(None, areas[idx], rho[idx], le, F=F, max_shots=settings.
+                                     max_iterations * max(n_a, 1), **common) for le in les]
     # incident power per node (radiance x area), for the energy balance and the warnings
-    H = np.zeros((N, 3))
-    H[idx] = matvec(F, L)
-    incident = H * areas[:, None]
-    if nodes.arriving is not None:          # the lights' and the world's light arrives too
-        incident += nodes.arriving * areas[:, None]
-    sent = areas[idx, None] * L                              # (n_a, 3)
-    if black_block is not None:
-        incident[black] = black_block.T.astype(np.float64) @ sent
-    escaped = ((1.0 - store.row_sums[idx])[:, None] * sent).sum(axis=0)
-    absorbed = ((1.0 - rho) * incident).sum(axis=0)
-    # The exact emitters' power counts as emitted, what of it reaches no node as escaped.
-    exact_out, exact_in = nodes.exact_power()
-    transported = nodes.le if nodes.exact is None else nodes.le - nodes.exact
-    emitted = (transported[idx] * areas[idx, None]).sum(axis=0) + _direct_power(nodes) \
-        + exact_out - exact_in
-    escaped = escaped + exact_out - exact_in
-    return Solution(node_radiance, res, solver, ff.active, incident,
-                    (emitted, absorbed, escaped), recip, int(matrix_bytes), store, [], balanced)
+    H = np.zeros((N, 3 * len(les)))
+    H[idx] = matvec(F, np.concatenate([res.radiance for res in results], axis=1))
+    out = []
+    for g, (nodes, res) in enumerate(zip(nodes_list, results)):
+        L = res.radiance
+        node_radiance = np.zeros((N, 3))
+        node_radiance[idx] = L
+        incident = H[:, 3 * g:3 * g + 3] * areas[:, None]
+        if nodes.arriving is not None:      # the lights' and the world's light arrives too
+            incident += nodes.arriving * areas[:, None]
+        sent = areas[idx, None] * L                              # (n_a, 3)
+        if black_block is not None:
+            incident[black] = black_block.T.astype(np.float64) @ sent
+        escaped = ((1.0 - store.row_sums[idx])[:, None] * sent).sum(axis=0)
+        absorbed = ((1.0 - rho) * incident).sum(axis=0)
+        # The exact emitters' power counts as emitted, what of it reaches no node as escaped.
+        exact_out, exact_in = nodes.exact_power()
+        transported = nodes.le if nodes.exact is None else nodes.le - nodes.exact
+        emitted = (transported[idx] * areas[idx, None]).sum(axis=0) + _direct_power(nodes) \
+            + exact_out - exact_in
+        escaped = escaped + exact_out - exact_in
+        out.append(Solution(node_radiance, res, solver, ff.active, incident,
+                            (emitted, absorbed, escaped), recip, int(matrix_bytes), store, [],
+                            balanced))
+    return out
 
 
 def _solve_matrix_free(ff, nodes, settings, monitor):

@@ -164,8 +164,8 @@ class RowStore:
 
     def add_compact(self, keys, cols, vals, row_sums=None):
         """Keep rows already compacted by :func:`compact_rows` (row sums: of ``vals`` if None)."""
-        self.row_sums[keys] = vals.sum(axis=1, dtype=np.float64) if row_sums is None \
-            else row_sums
+        sums = vals.sum(axis=1, dtype=np.float64) if row_sums is None or self.half else None
+        self.row_sums[keys] = sums if row_sums is None else row_sums
         if not self.half:
             self._append(keys, cols, vals)
             return
@@ -174,7 +174,7 @@ class RowStore:
             part = vals[s:s + HALF_CHUNK]
             hit = np.any(part > 0, axis=0)
             codes = encode_half(part[:, hit])
-            was, got = part.sum(axis=1, dtype=np.float64), decode_half(codes).sum(axis=1)
+            was, got = sums[s:s + HALF_CHUNK], decode_half(codes).sum(axis=1)
             self.scale[keys[s:s + HALF_CHUNK]] = np.divide(was, got, out=np.ones_like(was),
                                                            where=got > 0)
             self._append(keys[s:s + HALF_CHUNK], cols[hit], codes)

@@ -182,9 +182,9 @@ def _rows_times(F, L, start, stop, out=None):
 
 
 def matvec(F, L):
-    """``F @ L`` (N, 3) accumulated in float64, MATVEC_CHUNK_ROWS rows at a time (a float32 F
+    """``F @ L`` (N, K) accumulated in float64, MATVEC_CHUNK_ROWS rows at a time (a float32 F
     is never copied whole)."""
-    out = np.empty((F.shape[0], 3))
+    out = np.empty((F.shape[0], L.shape[1]))
     for s in range(0, F.shape[0], MATVEC_CHUNK_ROWS):
         e = min(s + MATVEC_CHUNK_ROWS, F.shape[0])
         _rows_times(F, L, s, e, out=out[s:e])
@@ -320,7 +320,8 @@ def solve_gauss_seidel(F, rho, le, *, tol=DEFAULT_TOLERANCE, max_iterations=DEFA
     ``L_K = (I - rho_K F_KK)^-1 (Le_K + rho_K F_K,~K L)`` with the newest values of the other
     blocks. ``I - rho F`` is an M-matrix, so by Varga's comparison theorem this converges at least
     as fast as point Gauss-Seidel (``block=1``), with vectorised work per block instead of a
-    Python step per row. The block inverses (3 x N x block) are computed once.
+    Python step per row. The block inverses (3 x N x block) are computed once. Several
+    emissions on one matrix: :func:`solve_gauss_seidel_many`.
 
     Parameters
     ----------
@@ -342,16 +343,25 @@ def solve_gauss_seidel(F, rho, le, *, tol=DEFAULT_TOLERANCE, max_iterations=DEFA
     -------
     SolveResult
     """
-    F, rho, le = _check_system(F, rho, le)
-    tol = _check_tol(tol)
+    return solve_gauss_seidel_many(F, rho, [le], tol=tol, max_iterations=max_iterations,
+                                   monitor=monitor, block=block)[0]
+
+
+def solve_gauss_seidel_many(F, rho, les, *, tol=DEFAULT_TOLERANCE,
+                            max_iterations=DEFAULT_MAX_ITERATIONS, monitor=None,
+                            block=GS_BLOCK_ROWS):
+    """:func:`solve_gauss_seidel` for the emissions ``les`` (a non-empty list of (N, 3)) at once:
+    each sweep reads the matrix once for all (a relight of several light groups). They share the
+    sweeps until every one is converged; one :class:`SolveResult` each."""
+    G, checked = len(les), [_check_system(F, rho, le) for le in les]
+    rho, le = checked[0][1], np.concatenate([c[2] for c in checked], axis=1)
+    tol, block = _check_tol(tol), _check_positive_int("block", block)
     max_iterations = _check_positive_int("max_iterations", max_iterations)
-    block = _check_positive_int("block", block)
-    monitor = SILENT if monitor is None else monitor
-    n = F.shape[0]
+    monitor, n = SILENT if monitor is None else monitor, F.shape[0]
     if n == 0 or not np.any(le):
-        return SolveResult(np.zeros((n, 3)), 0, 0.0, True, "gauss_seidel")
-    bounds = [(s, min(s + block, n)) for s in range(0, n, block)]
-    inverses = []
+        return [SolveResult(np.zeros((n, 3)), 0, 0.0, True, "gauss_seidel") for _ in range(G)]
+    rho_g = np.tile(rho, G)                                             # (n, 3G)
+    bounds, inverses = [(s, min(s + block, n)) for s in range(0, n, block)], []
     for s, e in bounds:
         Fkk = F[s:e, s:e].astype(np.float64)
         # (3, b, b): I - rho_c F_KK for each channel, inverted as one batch.
@@ -360,13 +370,11 @@ def solve_gauss_seidel(F, rho, le, *, tol=DEFAULT_TOLERANCE, max_iterations=DEFA
         inverses.append(np.linalg.inv(A))
         if monitor.due():
             monitor.update(0.0, "solving (Gauss-Seidel)")
-    L = le.copy()
-    residual, start, best = 1.0, None, 0.0
-    it = 0
-    tol = stopping_threshold(tol, rho)
+    L, it, tol = le.copy(), 0, stopping_threshold(tol, rho)
+    residual, start, best, each = 1.0, None, 0.0, np.ones(G)
     single = F.dtype == np.float32          # float32 gathers until the change reaches F32_FLOOR
     while it < max_iterations:
-        change = 0.0
+        change = np.zeros(G)
         single = single and residual > F32_FLOOR
         L32 = L.astype(np.float32) if single else None
         for (s, e), inv in zip(bounds, inverses):
@@ -383,22 +391,26 @@ def solve_gauss_seidel(F, rho, le, *, tol=DEFAULT_TOLERANCE, max_iterations=DEFA
                 slab = F[s:e].astype(np.float64, copy=False)
                 gathered = slab @ L
                 gathered -= slab[:, s:e] @ L[s:e]
-            rhs = le[s:e] + rho[s:e] * gathered        # (b, 3)
-            new = np.matmul(inv, rhs.T[:, :, None])[:, :, 0].T
-            change = max(change, float(np.abs(new - L[s:e]).max()))
+            rhs = (le[s:e] + rho_g[s:e] * gathered).reshape(e - s, G, 3)     # (b, G, 3)
+            new = np.matmul(inv, rhs.transpose(2, 0, 1)).transpose(1, 2, 0).reshape(e - s, -1)
+            step = np.abs(new - L[s:e]).reshape(e - s, G, 3)
+            change = np.maximum(change, step.max(axis=(0, 2)))
             L[s:e] = new
             if single:
                 L32[s:e] = new
             if monitor.due():
                 monitor.update(best, "solving (Gauss-Seidel)")
         it += 1
-        residual = change / float(np.abs(L).max())
+        top = np.abs(L).reshape(n, G, 3).max(axis=(0, 2))
+        each = np.divide(change, top, out=np.zeros(G), where=top > 0)
+        residual = float(each.max())
         start = residual if start is None else start
         best = max(best, _progress_fraction(residual, start, tol))
         if residual <= tol:
             break
     monitor.update(1.0 if residual <= tol else best, "solved (Gauss-Seidel)")
-    return SolveResult(L, it, residual, residual <= tol, "gauss_seidel")
+    return [SolveResult(L[:, 3 * g:3 * g + 3].copy(), it, float(r), bool(r <= tol), "gauss_seidel")
+            for g, r in enumerate(each)]
 
 
 # ----------------------------------------------------------------------------- progressive

@@ -114,8 +114,8 @@ def build_parser(need_input):
                    help="after the bake, multiply light group NAME's light by FACTOR before "
                         "saving (repeatable; groups: each emissive material, each point, spot "
                         "and sun light by its object's name, 'World', or Blender's light "
-                        "groups; the report lists them). A weighted sum of each group's own "
-                        "solution (one solve per group): no new bake")
+                        "groups; the report lists them). A weighted sum of each named group's "
+                        "own solution (solved together on the kept form factors): no new bake")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="run the bake's hemicube calls on a Dask distributed cluster: a "
                         "scheduler's address (tcp://host:8786), a scheduler file (.json, on "
@@ -155,7 +155,7 @@ def _apply_groups(context, given):
         for name, factor in given:
             groups[name].strength = factor
     try:
-        return relight.mix(context)
+        return relight.mix(context, every=False)
     except relight.job.BakeError as exc:
         raise BatchError(str(exc)) from None
 

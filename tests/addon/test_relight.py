@@ -255,6 +255,7 @@ def test_group_changes_after_the_first_are_a_weighted_sum_with_no_solve(package,
     def no_solve(*args, **kwargs):
         raise AssertionError("a light group change solved again")
     monkeypatch.setattr(relight.core, "relight", no_solve)
+    monkeypatch.setattr(relight.core, "relight_many", no_solve)
     groups["lamp"].strength = 1.0
     assert_close(colours_and_lux(walls), baked)
     groups["lamp"].strength = 2.0
@@ -539,22 +540,25 @@ def test_a_light_group_on_the_radiosity_mesh_equals_relight_with_that_light_off(
     assert not np.allclose(spot_only[1][0], full[1][0], rtol=0.05)
 
 
-def test_a_group_change_makes_that_group_alone_once(package, monkeypatch):
-    # Cost: the first change of a light's group casts that light alone (core.relight with
-    # lights=); the last light's group is then the rest of the lights' solution (one solve, no
-    # cast); changes after that solve nothing.
+def test_a_group_change_makes_every_group_alone_once(package, monkeypatch):
+    # Cost: the first change of a group makes every group's own solution, in one
+    # core.relight_many (one matrix swept for all): the first light cast alone (lights=), the
+    # last light's group the rest of the lights' solution (no cast); changes after that solve
+    # nothing.
     objects, _ = two_lights()
     bake()
-    calls, real = [], relight.core.relight
+    calls, one, many = [], relight.core.relight, relight.core.relight_many
     monkeypatch.setattr(relight.core, "relight",
-                        lambda result, **kw: calls.append(sorted(kw)) or real(result, **kw))
+                        lambda result, **kw: calls.append(sorted(kw)) or one(result, **kw))
+    monkeypatch.setattr(relight.core, "relight_many",
+                        lambda result, changes: calls.append([sorted(c) for c in changes])
+                        or many(result, changes))
     groups = bpy.context.scene.radiosity_groups
     groups["Bulb"].strength = 0.5
-    assert calls == [["emission", "lights"]]
+    assert calls == [[["emission", "lights"], ["emission"]]]
     groups["Spot"].strength = 0.5
-    assert calls == [["emission", "lights"], ["emission"]]
     groups["Bulb"].tint, groups["Spot"].strength = (1.0, 0.5, 0.2), 2.0
-    assert len(calls) == 2
+    assert len(calls) == 1
 
 
 def test_relight_that_moves_the_shadow_lines_bakes_again(package, fixed_cubes):

@@ -8,6 +8,7 @@ from bench.scenes import unit_cube
 from core.errors import BakeCancelled
 from core.progress import Monitor
 from core.solvers import (SolveResult, ambient_radiance, solve_direct, solve_gauss_seidel,
+                          solve_gauss_seidel_many,
                           solve_jacobi, solve_progressive)
 
 #: Iterative solvers run to this tolerance so that their answer must match the direct solve to
@@ -160,6 +161,30 @@ def test_solvers_agree_with_direct(room, solver, dtype):
     # float32 storage of F perturbs it by ~6e-8 relative: far below AGREE.
     err = np.abs(res.radiance - ref).max() / np.abs(ref).max()
     assert err < AGREE, (solver, err)
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_gauss_seidel_many_solves_each_emission_as_alone(room, dtype):
+    # Oracle: LU (solve_direct) per emission. Four emissions at once, one of them dark and one
+    # a thousand times dimmer than the others (each is converged on its own scale, not the
+    # brightest's); they share the sweeps, so none stops before it would alone.
+    F, areas, rho, le = _system(room)
+    rng = np.random.default_rng(5)
+    dim = np.zeros_like(le)
+    dim[-9:] = 1e-3 * rng.uniform(1.0, 5.0, (9, 3))     # the opposite face, dimly
+    les = [le, np.zeros_like(le), dim, le[::-1].copy()]
+    many = solve_gauss_seidel_many(F.astype(dtype), rho, les, tol=TOL)
+    assert len(many) == 4
+    for e, res in zip(les, many):
+        alone = solve_gauss_seidel(F.astype(dtype), rho, e, tol=TOL)
+        assert res.converged and res.residual <= TOL
+        assert res.iterations >= alone.iterations
+        ref = solve_direct(F, rho, e).radiance
+        scale = max(np.abs(ref).max(), 1e-300)
+        assert np.abs(res.radiance - ref).max() <= AGREE * scale
+    np.testing.assert_array_equal(many[1].radiance, 0.0)
+    with pytest.raises(ValueError, match="le must have shape"):
+        solve_gauss_seidel_many(F, rho, [le, le[:5]])
 
 
 def test_direct_residual_identity(room):
