@@ -42,10 +42,8 @@ from ..core.errors import RadiosityError
 from . import job, surfaces
 from .extract import ATTRIBUTE, extract
 from .light_units import Solution, units as light_units
+from .same import lights_factor as _lights_factor, same as _same
 
-#: Two values of a re-read scene are "unchanged" within this relative difference (float32 at the
-#: Blender boundary; the lights' factor is one per colour channel for all of them).
-SAME_RTOL = 1e-5
 
 #: What the user is told whenever the kept bake cannot serve.
 BAKE_AGAIN = "bake again"
@@ -234,11 +232,8 @@ def _prefetch(entry, ks):
             continue
         unit, wanted = entry.units[k], []
         if unit.materials is not None:
-            only, back = _dark(entry)
-            only[unit.materials] = entry.emission[unit.materials]
-            if back is not None:
-                back[unit.materials] = entry.back_emission[unit.materials]
-            if only.any() or (back is not None and back.any()):
+            only, back = _emission_of(entry, unit)
+            if only is not None:
                 wanted += [(only, back, None)] + ([lit] if light_units else [])
         elif light_units == [k] and np.array_equal(entry.lights_factor, np.ones(3)):
             wanted.append(lit)
@@ -255,6 +250,18 @@ def _prefetch(entry, ks):
             if change is not None:
                 todo.setdefault(_key(*change), change)
     _make(entry, todo)
+
+
+def _emission_of(entry, unit):
+    """(emission, back emission or None) of a unit of materials alone; (None, None) when it
+    is dark."""
+    only, back = _dark(entry)
+    only[unit.materials] = entry.emission[unit.materials]
+    if back is not None:
+        back[unit.materials] = entry.back_emission[unit.materials]
+    if only.any() or (back is not None and back.any()):
+        return only, back
+    return None, None
 
 
 def _world_change(entry):
@@ -341,11 +348,8 @@ def _unit(entry, k):
     t0 = time.perf_counter()
     unit, sol = entry.units[k], None
     if unit.materials is not None:
-        only, back = _dark(entry)
-        only[unit.materials] = entry.emission[unit.materials]
-        if back is not None:
-            back[unit.materials] = entry.back_emission[unit.materials]
-        if only.any() or (back is not None and back.any()):
+        only, back = _emission_of(entry, unit)
+        if only is not None:
             relit = _relit(entry, only, back)
             _same_mesh(entry, relit)
             sol = Solution.of(relit, _surfaces(entry))
@@ -457,54 +461,6 @@ def _read(context, entry):
     lights = new.get("lights")
     return emission, None if back is None else np.asarray(back, np.float64), lights, \
         _lights_factor(entry.lights_ref, lights)
-
-
-def _same(a, b):
-    if a is None or b is None:
-        return a is None and b is None
-    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
-        a, b = np.asarray(a), np.asarray(b)
-        if a.shape != b.shape:
-            return False
-        if a.dtype.kind in "fc":
-            return bool(np.allclose(a, b, rtol=SAME_RTOL, atol=SAME_RTOL * 1e-3))
-        return bool(np.array_equal(a, b))
-    if hasattr(a, "__dataclass_fields__"):
-        return type(a) is type(b) and all(_same(getattr(a, f), getattr(b, f))
-                                           for f in a.__dataclass_fields__)
-    if isinstance(a, (list, tuple)):
-        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
-    if hasattr(a, "__dict__") and not isinstance(a, type):
-        return type(a) is type(b) and _same(sorted(vars(a).items()), sorted(vars(b).items()))
-    return a == b
-
-
-def _lights_factor(old, new):
-    """(3,) factor per colour channel from the lights ``old`` to ``new`` when they differ by
-    one common factor per channel (power and colour scaled alike), else None (cast again)."""
-    if old is None or not len(old):
-        return np.ones(3) if new is None or not len(new) else None
-    if new is None or not len(new):
-        return np.zeros(3)                    # every light deleted: the old ones at 0
-    if len(old) != len(new) or list(old.names) != list(new.names):
-        return None
-    for f in old.__dataclass_fields__:
-        if f not in ("intensity", "sun_irradiance") and not _same(getattr(old, f),
-                                                                  getattr(new, f)):
-            return None
-    a = np.concatenate([old.intensity, old.sun_irradiance]).reshape(-1, 3)
-    b = np.concatenate([new.intensity, new.sun_irradiance]).reshape(-1, 3)
-    factor = np.ones(3)
-    for c in range(3):
-        on = a[:, c] > 0
-        if np.any(b[~on, c] > 0):
-            return None
-        if on.any():
-            ratio = b[on, c] / a[on, c]
-            if not np.allclose(ratio, ratio[0], rtol=SAME_RTOL):
-                return None
-            factor[c] = ratio[0]
-    return factor
 
 
 def _write(context, entry, solution, seconds):
