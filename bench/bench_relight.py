@@ -1,8 +1,11 @@
 """Relight and light groups (issue 12) against the bake, on the bundled samples, through the add-on.
 
 For each sample: the bake (radiosity.bake with the file's own settings), then a Relight after
-every emissive material's strength and every light's power x 2 (one new solve on the kept form
-factors, and the lights' own solution once), the first change of the first group (every
+every emissive material's strength and every light's power x 2 (each group scaled: a weighted sum
+of the groups' own solutions, made at once when missing; ``relight_summed``), the same Relight
+solved as before that (``relight_solved_s``: one new solve on the kept form factors, and the
+lights' own solution; ``summed_vs_solved``: how far apart, max |difference| / max colour), the
+first change of the first group (every
 group's own solution, once, in one core.relight_many: a material's emission alone, a light
 alone), a second one (a weighted sum, no solve), the first change of a point, spot or sun
 light's group (``group_light_first_s``: made with the first, a weighted sum), every group's own
@@ -12,8 +15,8 @@ bake holds in memory (radiosity_addon.relight.kept_bytes).
 
 ``--scenes generated --patches 10000``: instead of a sample, an open-plan office built here
 (:func:`generated`: desks, four point lights, a spot, emissive ceiling panels) baked to vertices
-with the patch size that gives about that many patches; its Relight scales the panels only (one
-new solve), a second one the lights too (their own solution, one more solve, once). Relights
+with the patch size that gives about that many patches; its Relight scales the panels only (the
+first summed Relight: every group's solution made), a second one the lights too (a sum). Relights
 print their CPU seconds too (``*_cpu_s``, this process: fairer on a busy machine), whether the
 bake's reciprocity scaling was reused (no Sinkhorn sweep) and the solver's sweeps
 (``relight_reused``).
@@ -154,6 +157,7 @@ def run(name, patches=10000, exact_direct=None):
         extra["relight_emission_s"] = round(time.perf_counter() - t0, 3)
         extra["relight_emission_cpu_s"] = round(time.process_time() - c0, 3)
         extra["relight_emission_core"] = _timings()
+        extra["relight_emission_summed"] = _summed()
         extra["relight_reused"] = _reused()
     for light in bpy.data.lights:
         light.energy *= 2.0
@@ -161,7 +165,9 @@ def run(name, patches=10000, exact_direct=None):
     assert bpy.ops.radiosity.relight() == {"FINISHED"}
     relit = time.perf_counter() - t0
     extra["relight_cpu_s"] = round(time.process_time() - c0, 3)
+    extra["relight_summed"] = _summed()
     extra["relight_core"] = _timings()
+    extra.update(_solved(relight))
     entry = relight.kept(bpy.context.scene)
     groups = bpy.context.scene.radiosity_groups
     t0 = time.perf_counter()
@@ -185,6 +191,41 @@ def run(name, patches=10000, exact_direct=None):
                     report["form_factor_bytes"] / 2 ** 20, 2),
                 kept_mb=round(relight.kept_bytes(entry) / 2 ** 20, 2),
                 group_seconds={k: round(v, 3) for k, v in entry.seconds.items()})
+
+
+def _summed():
+    return bool(json.loads(bpy.context.scene.radiosity.last_report)["relight"]["summed"])
+
+
+def _colours():
+    """Every baked object's written colours, (C, 4) float64."""
+    import numpy as np
+    out = []
+    for obj in bpy.context.scene.objects:
+        attr = obj.data.color_attributes.get(PACKAGE.radiosity_addon.extract.ATTRIBUTE) \
+            if obj.type == "MESH" else None
+        if attr is not None:
+            buf = np.empty(4 * len(attr.data), np.float32)
+            attr.data.foreach_get("color", buf)
+            out.append(buf.reshape(-1, 4))
+    return np.concatenate(out).astype(np.float64)
+
+
+def _solved(relight):
+    """The same Relight solved (as before the weighted sum: ``unit_factors`` said no): its
+    seconds and how far the summed colours are from it (max |difference| / max colour)."""
+    import numpy as np
+    summed, factors = _colours(), relight.unit_factors
+    relight.unit_factors = lambda *args: None
+    try:
+        t0 = time.perf_counter()
+        assert bpy.ops.radiosity.relight() == {"FINISHED"}
+        seconds = time.perf_counter() - t0
+    finally:
+        relight.unit_factors = factors
+    solved = _colours()
+    return dict(relight_solved_s=round(seconds, 3), summed_vs_solved=float(
+        np.abs(summed - solved).max() / np.abs(solved).max()))
 
 
 def _every_group(relight, entry):

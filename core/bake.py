@@ -402,17 +402,22 @@ def _relight(result, *, progress, cancel, **changes):
         return again
     monitor, st = Monitor(progress, cancel), state.settings
     with parallel.using(st.workers, cancel):
-        if state.store is None:     # a matrix-free bake kept no form factors
-            monitor.stage(*_STAGES["patches"])
-            monitor.update(1.0, "patches")
-            return _run(new_scene, state.settings, state.patches, monitor, t_start=t_start,
-                        timings={"patches": 0.0}, on_contact=state.on_contact,
-                        contact_lines=state.contact_lines,
-                        warnings=["relight: the bake kept no form factors (matrix-free "
-                                  "progressive): they were recomputed"])
+        if state.store is None:
+            return _recomputed(new_scene, state, monitor, t_start)
         return _run(new_scene, state.settings, state.patches, monitor, t_start=t_start,
                     timings={"patches": 0.0}, kept=state, on_contact=state.on_contact,
                     contact_lines=state.contact_lines)
+
+
+def _recomputed(new_scene, state, monitor, t_start):
+    """The relight of a matrix-free bake, which kept no form factors: computed again."""
+    monitor.stage(*_STAGES["patches"])
+    monitor.update(1.0, "patches")
+    return _run(new_scene, state.settings, state.patches, monitor, t_start=t_start,
+                timings={"patches": 0.0}, on_contact=state.on_contact,
+                contact_lines=state.contact_lines, warnings=[
+                    "relight: the bake kept no form factors (matrix-free progressive): they "
+                    "were recomputed"])
 
 
 def _lines_moved(state, new_scene):
@@ -439,12 +444,9 @@ def _lines_moved(state, new_scene):
 
 def _run(scene, settings, patches, monitor, *, t_start, timings, kept=None, on_contact=None,
          contact_lines=None, warnings=()):
-    """Form factors (reusing ``kept``'s rows), solve, colours: the stages of core.pipeline
-    (:func:`_front`, the solve, :func:`_back`; core.groups runs them apart).
-
-    ``timings`` and ``warnings`` are what came before (patches); the result's report holds
-    them followed by this run's.
-    """
+    """Form factors (reusing ``kept``'s rows), solve, colours: :func:`_front`, the solve,
+    :func:`_back` (core.groups runs them apart). ``timings`` and ``warnings``: those before
+    (patches); the report holds them followed by this run's."""
     direct, nodes, ff, sky, more = _front(scene, settings, patches, monitor, kept)
     timings = dict(timings, **more)
     monitor.stage(*_STAGES["solve"])

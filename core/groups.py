@@ -14,17 +14,22 @@ would be alone.
 """
 
 import time
+from collections import namedtuple
 
 import numpy as np
 
 from . import memory, parallel
-from .bake import _LevelMonitor, _back, _front, _prepare, _run
+from .bake import _LevelMonitor, _back, _front, _prepare, _recomputed
 from .pipeline import solve_many
 from .progress import Monitor, watching
 
 __all__ = ["relight_many"]
 
 _CHANGES = ("reflectance", "emission", "back_emission", "lights")
+
+#: What :func:`core.bake._front` returns, and a relight waiting for its solve.
+_Front = namedtuple("_Front", "direct nodes ff sky timings")
+_Ready = namedtuple("_Ready", "i state scene t_start monitor front")
 
 
 def relight_many(result, changes, *, progress=None, cancel=None):
@@ -61,7 +66,7 @@ def relight_many(result, changes, *, progress=None, cancel=None):
 def _many(result, changes, progress, cancel):
     n = len(changes)
     out = [None] * n
-    ready = []                               # (i, state, scene, t_start, monitor, front)
+    ready = []                               # _Ready
     for i, c in enumerate(changes):
         state, scene, t_start, again = _prepare(result, progress=progress, cancel=cancel,
                                                 **{k: c.get(k) for k in _CHANGES})
@@ -71,44 +76,40 @@ def _many(result, changes, progress, cancel):
         monitor = _LevelMonitor(progress, cancel, i, n)
         with parallel.using(state.settings.workers, cancel):
             if state.store is None:          # a matrix-free bake kept no form factors
-                out[i] = _run(scene, state.settings, state.patches, monitor, t_start=t_start,
-                              timings={"patches": 0.0}, on_contact=state.on_contact,
-                              contact_lines=state.contact_lines,
-                              warnings=["relight: the bake kept no form factors (matrix-free "
-                                        "progressive): they were recomputed"])
+                out[i] = _recomputed(scene, state, monitor, t_start)
                 continue
-            front = _front(scene, state.settings, state.patches, monitor, state)
-        ready.append((i, state, scene, t_start, monitor, front))
+            front = _Front(*_front(scene, state.settings, state.patches, monitor, state))
+        ready.append(_Ready(i, state, scene, t_start, monitor, front))
     clusters = []                            # relights that solve one matrix
     for r in ready:
-        cl = next((cl for cl in clusters if _same_matrix(cl[0][5], r[5])), None)
+        cl = next((cl for cl in clusters if _same_matrix(cl[0].front, r.front)), None)
         if cl is None:
             clusters.append([r])
         else:
             cl.append(r)
     for cl in clusters:
-        state = cl[0][1]
+        state = cl[0].state
         t0 = time.perf_counter()
-        sols = solve_many(cl[0][5][2], [r[5][1] for r in cl], state.settings,
+        sols = solve_many(cl[0].front.ff, [r.front.nodes for r in cl], state.settings,
                           Monitor(None, cancel), state.balance)
         seconds = time.perf_counter() - t0
         memory.mark("solve")
-        for (i, state, scene, t_start, monitor, front), sol in zip(cl, sols):
-            direct, nodes, ff, sky, more = front
-            timings = dict({"patches": 0.0}, **more, solve=seconds / len(cl))
-            with parallel.using(state.settings.workers, cancel):
-                out[i] = _back(scene, state.settings, state.patches, monitor, t_start, timings,
-                               state, state.on_contact, state.contact_lines, (), direct, nodes,
-                               ff, sky, sol)
+        for r, sol in zip(cl, sols):
+            st, f = r.state, r.front
+            timings = dict({"patches": 0.0}, **f.timings, solve=seconds / len(cl))
+            with parallel.using(st.settings.workers, cancel):
+                out[r.i] = _back(r.scene, st.settings, st.patches, r.monitor, r.t_start,
+                                 timings, st, st.on_contact, st.contact_lines, (), f.direct,
+                                 f.nodes, f.ff, f.sky, sol)
             if len(cl) > 1:
-                out[i].report["shared_solve"] = dict(relights=len(cl), seconds=seconds)
+                out[r.i].report["shared_solve"] = dict(relights=len(cl), seconds=seconds)
     return out
 
 
 def _same_matrix(a, b):
     """Whether two :func:`core.bake._front` outcomes solve one matrix: the same solved nodes,
     the same stored rows, the same reflectance and nodes allowed (only their light differs)."""
-    fa, fb, na, nb = a[2], b[2], a[1], b[1]
+    fa, fb, na, nb = a.ff, b.ff, a.nodes, b.nodes
     return (not fa.overflow and not fb.overflow and np.array_equal(fa.active, fb.active)
             and len(fa.store.batches) == len(fb.store.batches)
             and all(x is y for x, y in zip(fa.store.batches, fb.store.batches))

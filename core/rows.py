@@ -164,7 +164,8 @@ class RowStore:
 
     def add_compact(self, keys, cols, vals, row_sums=None):
         """Keep rows already compacted by :func:`compact_rows` (row sums: of ``vals`` if None)."""
-        sums = vals.sum(axis=1, dtype=np.float64) if row_sums is None or self.half else None
+        if row_sums is None or self.half:
+            sums = vals.sum(axis=1, dtype=np.float64)
         self.row_sums[keys] = sums if row_sums is None else row_sums
         if not self.half:
             self._append(keys, cols, vals)

@@ -105,13 +105,17 @@ def _check_system(F, rho, le):
         raise TypeError(f"F must be float32 or float64; got {F.dtype}")
     n = F.shape[0]
     rho = _check_rgb("rho", rho, n)
-    le = _check_rgb("le", le, n)
     if np.any(rho < 0.0) or np.any(rho >= 1.0):
         raise ValueError("rho must lie in [0, 1); got values in "
                          f"[{rho.min():.6g}, {rho.max():.6g}]")
+    return F, rho, _check_le(le, n)
+
+
+def _check_le(le, n):
+    le = _check_rgb("le", le, n)
     if np.any(le < 0.0):
         raise ValueError(f"le must be >= 0; got minimum {le.min():.6g}")
-    return F, rho, le
+    return le
 
 
 def _check_rgb(name, value, n):
@@ -175,10 +179,7 @@ def _progress_fraction(residual, start, tol):
 
 def _rows_times(F, L, start, stop, out=None):
     """``F[start:stop] @ L`` accumulated in float64. Returns (stop - start, 3)."""
-    block = F[start:stop]
-    if block.dtype != np.float64:
-        block = block.astype(np.float64)
-    return np.matmul(block, L, out=out)
+    return np.matmul(F[start:stop].astype(np.float64, copy=False), L, out=out)
 
 
 def matvec(F, L):
@@ -353,9 +354,9 @@ def solve_gauss_seidel_many(F, rho, les, *, tol=DEFAULT_TOLERANCE,
     """:func:`solve_gauss_seidel` for the emissions ``les`` (a non-empty list of (N, 3)) at once:
     each sweep reads the matrix once for all (a relight of several light groups). They share the
     sweeps until every one is converged; one :class:`SolveResult` each."""
-    G, checked = len(les), [_check_system(F, rho, le) for le in les]
-    rho, le = checked[0][1], np.concatenate([c[2] for c in checked], axis=1)
-    tol, block = _check_tol(tol), _check_positive_int("block", block)
+    F, rho, first = _check_system(F, rho, les[0])     # F and rho once; each emission below
+    le = np.concatenate([first] + [_check_le(x, F.shape[0]) for x in les[1:]], axis=1)
+    G, tol, block = len(les), _check_tol(tol), _check_positive_int("block", block)
     max_iterations = _check_positive_int("max_iterations", max_iterations)
     monitor, n = SILENT if monitor is None else monitor, F.shape[0]
     if n == 0 or not np.any(le):
@@ -386,8 +387,7 @@ def solve_gauss_seidel_many(F, rho, les, *, tol=DEFAULT_TOLERANCE,
                 gathered += F[s:e, e:] @ L32[e:]
             else:
                 # One contiguous slab product, then remove the block's own part: F >= 0 and
-                # L >= 0, so the subtraction loses no significant digits (no cancellation of
-                # signs).
+                # L >= 0, so the subtraction loses no significant digits (no sign cancellation).
                 slab = F[s:e].astype(np.float64, copy=False)
                 gathered = slab @ L
                 gathered -= slab[:, s:e] @ L[s:e]
@@ -439,8 +439,7 @@ def ambient_radiance(areas, rho, unshot, mask=None):
     """
     areas = np.asarray(areas, dtype=np.float64)
     n = areas.shape[0]
-    rho = _check_rgb("rho", rho, n)
-    unshot = _check_rgb("unshot", unshot, n)
+    rho, unshot = _check_rgb("rho", rho, n), _check_rgb("unshot", unshot, n)
     m = np.ones(n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
     a = areas[m]
     total = a.sum()

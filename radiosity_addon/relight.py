@@ -8,7 +8,8 @@ after reopening a file, or Clear Bake, there is nothing to relight: :func:`relig
 again.
 
 * **Relight** (:func:`relight`): reads the scene again; if anything but the emissive materials'
-  strength and colour and the point, spot and sun lights changed, it stops (bake again). New
+  strength and colour and the point, spot and sun lights changed, it stops (bake again). Each
+  group only scaled (:func:`same.unit_factors`): the groups' weighted sum, no solve. New
   emission goes through ``core.relight`` (a new solve on the kept form factors). The lights'
   direct light is kept summed in the bake: lights scaled alike (one factor per colour channel)
   add the lights' own solution times the factor - 1; lights whose power or colour changed apart
@@ -42,7 +43,7 @@ from ..core.errors import RadiosityError
 from . import job, surfaces
 from .extract import ATTRIBUTE, extract
 from .light_units import Solution, units as light_units
-from .same import lights_factor as _lights_factor, same as _same
+from .same import lights_factor as _lights_factor, same as _same, unit_factors
 
 
 #: What the user is told whenever the kept bake cannot serve.
@@ -78,6 +79,8 @@ class Kept:
     seconds: dict = field(default_factory=dict)
     kept_mb: float = 0.0         # kept_bytes at keep time (the panel shows it)
     made: dict = field(default_factory=dict)   # relights made together (:func:`_prefetch`)
+    scale: dict = field(default_factory=dict)  # unit index -> (3,): the scene's unit is the
+    #                                            kept one (``full``'s) times this (no solve)
 
 
 def kept(scene):
@@ -228,7 +231,7 @@ def _prefetch(entry, ks):
     world = _world_change(entry)
     light_units = [j for j, u in enumerate(entry.units) if u.materials is None]
     for k in ks:
-        if k in entry.basis:
+        if k in entry.basis or len(entry.units) == 1:           # one unit: ``full`` (_unit)
             continue
         unit, wanted = entry.units[k], []
         if unit.materials is not None:
@@ -347,7 +350,9 @@ def _unit(entry, k):
         return entry.basis[k]
     t0 = time.perf_counter()
     unit, sol = entry.units[k], None
-    if unit.materials is not None:
+    if len(entry.units) == 1:
+        sol = entry.full                                    # the one unit is all the light
+    elif unit.materials is not None:
         only, back = _emission_of(entry, unit)
         if only is not None:
             relit = _relit(entry, only, back)
@@ -403,8 +408,8 @@ def _mixed(entry, weights, every=False):
     """The written Solution: the light with every group at 1, plus each weighted group's own
     solution times (its weight - 1). ``every``: when a group's solution is missing, make every
     group's at once (:func:`_prefetch`), so the next groups' changes solve nothing."""
-    wanted = [k for k, u in enumerate(entry.units) if not np.array_equal(weights[u.group],
-                                                                          np.ones(3))]
+    w = {k: weights[u.group] * entry.scale.get(k, 1.0) for k, u in enumerate(entry.units)}
+    wanted = [k for k in w if not np.array_equal(w[k], np.ones(3))]
     order = wanted
     if every and any(k not in entry.basis for k in wanted):
         order = range(len(entry.units))
@@ -417,7 +422,7 @@ def _mixed(entry, weights, every=False):
     total = entry.full
     for k in wanted:
         sol = entry.basis[k]
-        total = total if sol is None else total.combine(sol, weights[entry.units[k].group] - 1.0)
+        total = total if sol is None else total.combine(sol, w[k] - 1.0)
     return total
 
 
@@ -463,15 +468,16 @@ def _read(context, entry):
         _lights_factor(entry.lights_ref, lights)
 
 
-def _write(context, entry, solution, seconds):
-    """Write ``solution`` as a bake writes (job.apply); returns the report."""
+def _write(context, entry, solution, seconds, summed=False):
+    """Write ``solution`` as a bake writes (job.apply); returns the report (``summed``: a
+    Relight that was the groups' weighted sum, no solve)."""
     result = solution.as_result(entry.template)
     outdoor = entry.template.report.get("sky", {}).get("outdoor_lux")
     for surf, arriving in zip(_surfaces(entry), solution.surfaces):
         surfaces.fill(surf, arriving, outdoor)
     report = job.apply(context, entry.bake_input, result, keep=False)
     report["relight"] = dict(seconds=round(seconds, 4), groups=group_names(entry),
-                             kept_mb=round(kept_bytes(entry) / 2 ** 20, 2))
+                             kept_mb=round(kept_bytes(entry) / 2 ** 20, 2), summed=summed)
     context.scene.radiosity.last_report = json.dumps(report, default=str)
     return report
 
@@ -479,6 +485,9 @@ def _write(context, entry, solution, seconds):
 def relight(context):
     """Relight the scene's kept bake with the scene's current light (main thread).
 
+    When each group's light was only scaled (strength, power, colour: ``same.unit_factors``),
+    this is the groups' weighted sum with no solve (every group's solution is made at once
+    when one is missing, as :func:`mix` makes them).
     Returns the report dict; raises RelightError (nothing written) when there is no kept bake or
     the scene changed otherwise."""
     scene = context.scene
@@ -502,6 +511,15 @@ def relight(context):
         factor = None              # the world cannot leave the lights' solution on this mesh
         lights = _alone(entry.lights_ref, ()) if lights is None else lights
     before = dict(vars(entry))
+    scale = unit_factors(entry.units, (entry.emission, entry.back_emission, _reference(entry)),
+                         (emission, back, lights))
+    if scale is not None:
+        try:
+            entry.scale = scale
+            return _write(context, entry, _mixed(entry, _weights(scene, entry), True),
+                          time.perf_counter() - t0, summed=True)
+        except RelightError:       # a group alone re-meshed: solve the scene's light below
+            vars(entry).update(before)
     try:
         if factor is None:         # lights moved, added or changed apart: cast them again
             relit = _relit(entry, emission, back, lights)
@@ -522,7 +540,7 @@ def relight(context):
                 solution = solution.combine(_lights_only(entry), factor - 1.0)
             entry.template = relit
         entry.emission, entry.back_emission, entry.lights_factor = emission, back, factor
-        entry.full, entry.basis = solution, {}
+        entry.full, entry.basis, entry.scale = solution, {}, {}
         solution = _mixed(entry, _weights(scene, entry))  # a group new since a cast is at 1
         report = _write(context, entry, solution, time.perf_counter() - t0)
     except BaseException:          # nothing was written: the kept bake stays as it was
@@ -531,6 +549,14 @@ def relight(context):
     if group_names(entry) != [g.name for g in scene.radiosity_groups]:
         _ops().set_groups(scene, group_names(entry), keep_values=True)
     return report
+
+
+def _reference(entry):
+    """The kept lights at the power ``full`` holds: ``lights_ref`` times ``lights_factor``."""
+    ref, f = entry.lights_ref, entry.lights_factor
+    if ref is None or not len(ref):
+        return ref
+    return replace(ref, intensity=ref.intensity * f, sun_irradiance=ref.sun_irradiance * f)
 
 
 def _check_baked(scene, entry):

@@ -37,14 +37,27 @@ def lights_factor(old, new):
         return np.ones(3) if new is None or not len(new) else None
     if new is None or not len(new):
         return np.zeros(3)                    # every light deleted: the old ones at 0
-    if len(old) != len(new) or list(old.names) != list(new.names):
+    if not _same_but_power(old, new):
         return None
-    for f in old.__dataclass_fields__:
-        if f not in ("intensity", "sun_irradiance") and not same(getattr(old, f),
-                                                                 getattr(new, f)):
-            return None
-    a = np.concatenate([old.intensity, old.sun_irradiance]).reshape(-1, 3)
-    b = np.concatenate([new.intensity, new.sun_irradiance]).reshape(-1, 3)
+    return channel_factor(_power(old), _power(new))
+
+
+def _same_but_power(old, new):
+    """Whether the core Lights ``old`` and ``new`` differ at most in their power."""
+    if len(old) != len(new) or list(old.names) != list(new.names):
+        return False
+    return all(same(getattr(old, f), getattr(new, f)) for f in old.__dataclass_fields__
+               if f not in ("intensity", "sun_irradiance"))
+
+
+def _power(lights):
+    """(L, 3): the point and spot lights' intensity, then the suns' irradiance."""
+    return np.concatenate([lights.intensity, lights.sun_irradiance]).reshape(-1, 3)
+
+
+def channel_factor(a, b):
+    """(3,) factor per colour channel with ``b = factor * a`` (arrays of RGB rows), else None."""
+    a, b = np.asarray(a, np.float64).reshape(-1, 3), np.asarray(b, np.float64).reshape(-1, 3)
     factor = np.ones(3)
     for c in range(3):
         on = a[:, c] > 0
@@ -56,3 +69,37 @@ def lights_factor(old, new):
                 return None
             factor[c] = ratio[0]
     return factor
+
+
+def unit_factors(units, old, new):
+    """{unit index: (3,) factor} when the scene ``new`` differs from ``old`` only by one factor
+    per colour channel for each unit (light_units.Unit) of light: each emissive material's
+    strength and colour, each light's power and colour, as its group holds them; None for any
+    other change (a unit's parts scaled apart, a world's group scaled, the lights moved).
+    ``old``, ``new``: (emission (M, 3), back emission or None, core Lights or None)."""
+    (em0, back0, lights0), (em1, back1, lights1) = old, new
+    rows0, rows1 = [np.asarray(em0, np.float64)], [np.asarray(em1, np.float64)]
+    if back0 is not None:
+        rows0.append(np.asarray(back0, np.float64))
+        rows1.append(np.asarray(back1, np.float64))
+    if (lights0 is None or not len(lights0)) != (lights1 is None or not len(lights1)):
+        return None
+    if lights0 is not None and len(lights0):
+        if not _same_but_power(lights0, lights1):
+            return None
+        rows0.append(_power(lights0))
+        rows1.append(_power(lights1))
+    a, b = np.concatenate(rows0), np.concatenate(rows1)
+    M, blocks = len(em0), 1 + (back0 is not None)       # rows: emission, back, then lights
+    out, free = {}, np.ones(len(a), bool)
+    for k, unit in enumerate(units):
+        if unit.materials is not None:
+            rows = np.concatenate([np.asarray(unit.materials) + i * M for i in range(blocks)])
+        else:
+            rows = blocks * M + np.asarray(unit.lights, np.int64)
+        factor = channel_factor(a[rows], b[rows])
+        if factor is None or (unit.world and not np.array_equal(factor, np.ones(3))):
+            return None                       # the world is as baked (Relight reads it)
+        free[rows] = False
+        out[k] = factor
+    return out if same(a[free], b[free]) else None

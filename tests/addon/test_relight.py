@@ -579,3 +579,97 @@ def test_relight_that_moves_the_shadow_lines_bakes_again(package, fixed_cubes):
     for (col, lux), (e_col, e_lux) in zip(relit, expected):
         assert col.shape == e_col.shape                # the same radiosity mesh
         assert_close((col, lux), (e_col, e_lux))
+
+
+@pytest.mark.parametrize("cull", [0.0, CULL])
+def test_relight_that_only_scales_groups_is_their_weighted_sum_with_no_solve(package,
+                                                                           fixed_cubes,
+                                                                           monkeypatch, cull):
+    # Each group's light scaled alone (a material's strength and colour, a light's power and
+    # colour) is a weighted sum of the groups' own solutions, which the first such Relight
+    # makes at once (one core.relight_many). Oracle: a fresh bake of the scene as it is, within
+    # the two solves' tolerance and the light culling's share (CULL: a light alone is culled
+    # at the points where it is dim, not where the sum is).
+    monkeypatch.setattr(PACKAGE.core.lights, "CULL", cull)
+    objects, (bulb, spot) = two_lights()
+    lamp = mesh_object("Lamp", *square(0.6, z=1.45, down=True),
+                       material("lamp", emission=(1.0, 1.0, 1.0), strength=4.0,
+                                kind="emission"))
+    objects.append(lamp)
+    bake(shadow_cuts=False)
+    baked = [colours_and_lux(o) for o in objects]
+    calls, one, many = [], relight.core.relight, relight.core.relight_many
+    monkeypatch.setattr(relight.core, "relight_many",
+                        lambda result, changes: calls.append(len(changes)) or many(result,
+                                                                                  changes))
+    bulb.data.energy *= 2.0
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    assert calls == [3]          # the lamp alone, the lights, the bulb alone (no world here)
+    assert json.loads(bpy.context.scene.radiosity.last_report)["relight"]["summed"]
+
+    def no_solve(*args, **kw):
+        raise AssertionError("solved")
+
+    monkeypatch.setattr(relight.core, "relight", no_solve)
+    monkeypatch.setattr(relight.core, "relight_many", no_solve)
+    set_lamp(lamp, strength=6.0, colour=(1.0, 0.6, 0.3))
+    spot.data.energy, spot.data.color = 30.0, (0.5, 0.7, 1.0)
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    bpy.context.scene.radiosity_groups["Spot"].strength = 0.5       # the groups on top
+    summed = [colours_and_lux(o) for o in objects]
+    monkeypatch.setattr(relight.core, "relight", one)
+    monkeypatch.setattr(relight.core, "relight_many", many)
+    bpy.context.scene.radiosity_groups["Spot"].strength = 1.0
+    spot.data.energy = 15.0
+    expected = fresh(*objects)
+    assert not np.allclose(summed[1][0], baked[1][0], rtol=0.05)
+    assert_near(summed, expected, baked, cull)
+
+
+def test_relight_of_a_change_that_is_not_a_group_scaled_solves(package, fixed_cubes,
+                                                               monkeypatch):
+    # Two lights in one Blender light group are one unit: the bulb's power changed alone is no
+    # weighted sum of the groups, so Relight casts the lights again (core.relight(lights=)).
+    # Oracle: a fresh bake, within the two solves' tolerance.
+    objects, (bulb, spot) = two_lights()
+    bulb.lightgroup = spot.lightgroup = "Lights"
+    bake()
+    assert [g.name for g in bpy.context.scene.radiosity_groups] == ["Lights"]
+    calls, one = [], relight.core.relight
+    monkeypatch.setattr(relight.core, "relight",
+                        lambda result, **kw: calls.append(sorted(kw)) or one(result, **kw))
+    bulb.data.energy *= 3.0
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    assert calls == [["emission", "lights"]]
+    assert not json.loads(bpy.context.scene.radiosity.last_report)["relight"]["summed"]
+    relit = [colours_and_lux(o) for o in objects]
+    monkeypatch.setattr(relight.core, "relight", one)
+    assert_close(relit[1], fresh(objects[1])[0])
+
+
+def test_unit_factors_are_one_per_group_and_channel_or_none(package):
+    same, Unit = PACKAGE.radiosity_addon.same, PACKAGE.radiosity_addon.light_units.Unit
+    make = PACKAGE.core.make_lights
+
+    def lights(power=(40.0, 80.0), where=(0.0, 0.0, 1.0)):
+        return make([dict(kind="point", name=f"L{i}", position=where, power=p)
+                     for i, p in enumerate(power)])
+
+    units = [Unit("a", np.array([0])), Unit("b", np.array([1, 2])), Unit("L0", None, (0,)),
+             Unit("World", None, (1,), True)]
+    em = np.array([[1.0, 1.0, 1.0], [2.0, 1.0, 0.5], [3.0, 3.0, 3.0], [0.0, 0.0, 0.0]])
+    old = (em, None, lights())
+    got = same.unit_factors(units, old, (em * [[2, 1, 1], [3, 3, 3], [3, 3, 3], [0, 0, 0]],
+                                         None, lights((20.0, 80.0))))
+    assert sorted(got) == [0, 1, 2, 3]
+    np.testing.assert_allclose([got[k] for k in range(4)],
+                               [[2, 1, 1], [3, 3, 3], [0.5, 0.5, 0.5], [1, 1, 1]])
+    apart = em.copy()
+    apart[2] *= 2.0                                            # b's two materials apart
+    assert same.unit_factors(units, old, (apart, None, lights())) is None
+    lit = em.copy()
+    lit[3] = 1.0                                               # a dark material emits
+    assert same.unit_factors(units, old, (lit, None, lights())) is None
+    assert same.unit_factors(units, old, (em, None, lights(where=(0.1, 0, 1)))) is None
+    assert same.unit_factors(units, old, (em, None, lights((40.0, 60.0)))) is None  # the world
+    assert same.unit_factors(units, old, (em, None, None)) is None
