@@ -8,7 +8,8 @@ Steps run from ``bpy.app.timers`` (the event loop keeps running between them, as
 open the sidebar on the Radiosity tab, start the bake as the button does (``INVOKE_DEFAULT`` in
 the 3D view's context), press Esc with xdotool in the middle, start it again and watch the progress
 until it ends, toggle Show Bake, take screenshots with ImageMagick's ``import -window root``,
-disable and re-enable the extension, and quit in the middle of a third bake. Every observation
+press Relight after doubling the lamp and set a light group's strength, disable and re-enable
+the extension, and quit in the middle of a third bake. Every observation
 goes to OUT_DIR/results.json; tests/ui/test_ui.py judges them. Nothing here asserts.
 """
 
@@ -106,6 +107,38 @@ def invoke_bake():
     window, area, ui, _ = view3d()
     with bpy.context.temp_override(window=window, area=area, region=ui):
         return sorted(bpy.ops.radiosity.bake("INVOKE_DEFAULT"))
+
+
+def colours():
+    """{visible mesh: its Radiosity colours (C, 3) float64}."""
+    out = {}
+    for obj in bpy.context.scene.objects:
+        attr = obj.data.color_attributes.get("Radiosity") if obj.type == "MESH" else None
+        if attr is not None and obj.visible_get():
+            buf = np.empty(len(attr.data) * 4, np.float32)
+            attr.data.foreach_get("color", buf)
+            out[obj.name] = buf.reshape(-1, 4)[:, :3].astype(np.float64)
+    return out
+
+
+def apart(now, baked, factor):
+    """max |now - factor x baked| / max |factor x baked| over every mesh (None: meshes differ)."""
+    if sorted(now) != sorted(baked) or any(now[k].shape != baked[k].shape for k in now):
+        return None
+    top = max(float(np.abs(factor * b).max()) for b in baked.values())
+    return max(float(np.abs(now[k] - factor * baked[k]).max()) for k in now) / top
+
+
+def emission_strengths():
+    """The unlinked emission Strength sockets of every node material."""
+    out = []
+    for mat in bpy.data.materials:
+        for node in mat.node_tree.nodes if mat.node_tree else ():
+            for key in ("Strength", "Emission Strength"):
+                sock = node.inputs.get(key) if hasattr(node, "inputs") else None
+                if sock is not None and not sock.is_linked:
+                    out.append(sock)
+    return out
 
 
 def redraw():
@@ -217,6 +250,32 @@ def scenario():
     redraw()
     yield 0.5
     results["lux_shading_off"] = shading()
+
+    # Relight and a light group's slider, as after a bake: the lamp's strength doubled, the
+    # Relight button's operator in the sidebar, then the group's Strength set as its slider sets
+    # it (its update writes the mix). Both are compared with the bake's colours.
+    baked = colours()
+    strengths = [sock for sock in emission_strengths() if sock.default_value > 0]
+    for sock in strengths:
+        sock.default_value *= 2.0
+    with bpy.context.temp_override(window=window, area=area, region=ui):
+        results["relight"] = sorted(bpy.ops.radiosity.relight("INVOKE_DEFAULT"))
+    redraw()
+    yield 1.0
+    results["relight_report"] = json.loads(bpy.context.scene.radiosity.last_report)["relight"]
+    results["relight_error"] = apart(colours(), baked, 2.0)
+    screenshot("after_relight.png")
+    groups = bpy.context.scene.radiosity_groups
+    results["groups"] = [g.name for g in groups]
+    if len(groups):
+        groups[0].strength = 0.5
+        redraw()
+        yield 1.0
+        results["group_error"] = apart(colours(), baked, 1.0)
+        groups[0].strength = 1.0
+    for sock in strengths:
+        sock.default_value *= 0.5
+    yield 0.3
 
     # The light's panel: a spot light made active, Properties > Light data shows its Radiosity
     # panel (the IES / EULUMDAT file field).

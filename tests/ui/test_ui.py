@@ -141,8 +141,26 @@ def test_light_panel_shows_for_a_spot_light(session):
     assert results["light_panel_poll"] is True
 
 
+#: Relight and the group slider against the bake: the Cornell box has one light group, so the
+#: lamp x 2 is the bake x 2 and the group at 0.5 the bake (the group's solution is the bake's; a
+#: factor of 2 is exact in floating point), up to the float32 colour attribute.
+RELIGHT_RTOL = 1e-5
+
+
+def test_relight_button_and_a_group_slider_rewrite_the_colours(session):
+    """After the lamp's strength is doubled, Relight in the real window writes twice the bake
+    (a weighted sum, no solve); the group's Strength at 0.5 then writes the bake again."""
+    results, _ = session
+    assert results["relight"] == ["FINISHED"]
+    assert results["relight_report"]["summed"] is True
+    assert results["groups"] == ["light"]
+    assert results["relight_error"] is not None and results["relight_error"] < RELIGHT_RTOL
+    assert results["group_error"] is not None and results["group_error"] < RELIGHT_RTOL
+
+
 @pytest.mark.parametrize("name", ["before_bake.png", "during_bake.png", "after_bake.png",
-                                  "advanced_open.png", "light_panel.png", "lux_view.png"])
+                                  "advanced_open.png", "light_panel.png", "lux_view.png",
+                                  "after_relight.png"])
 def test_screenshot_is_not_blank(session, name):
     from PIL import Image
 
