@@ -469,13 +469,16 @@ def _read(context, entry):
 
 
 def _write(context, entry, solution, seconds, summed=False):
-    """Write ``solution`` as a bake writes (job.apply); returns the report (``summed``: a
-    Relight that was the groups' weighted sum, no solve)."""
+    """Write ``solution`` as a bake writes (job.apply); returns the report (``summed``: the
+    groups' weighted sum, no solve of its own: its time, not the kept bake's stages)."""
     result = solution.as_result(entry.template)
     outdoor = entry.template.report.get("sky", {}).get("outdoor_lux")
     for surf, arriving in zip(_surfaces(entry), solution.surfaces):
         surfaces.fill(surf, arriving, outdoor)
     report = job.apply(context, entry.bake_input, result, keep=False)
+    if summed:
+        report["timings"] = dict(total=seconds, light_groups=seconds,
+                                 write=report["timings"]["write"])
     report["relight"] = dict(seconds=round(seconds, 4), groups=group_names(entry),
                              kept_mb=round(kept_bytes(entry) / 2 ** 20, 2), summed=summed)
     context.scene.radiosity.last_report = json.dumps(report, default=str)
@@ -594,4 +597,4 @@ def mix(context, every=True):
         raise RelightError(f"Light groups: no bake is kept in memory; {BAKE_AGAIN}")
     t0 = time.perf_counter()
     solution = _mixed(entry, _weights(context.scene, entry), every=every)
-    return _write(context, entry, solution, time.perf_counter() - t0)
+    return _write(context, entry, solution, time.perf_counter() - t0, summed=True)

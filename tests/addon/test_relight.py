@@ -615,6 +615,9 @@ def test_relight_that_only_scales_groups_is_their_weighted_sum_with_no_solve(pac
     set_lamp(lamp, strength=6.0, colour=(1.0, 0.6, 0.3))
     spot.data.energy, spot.data.color = 30.0, (0.5, 0.7, 1.0)
     assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    report = json.loads(bpy.context.scene.radiosity.last_report)
+    assert sorted(report["timings"]) == ["light_groups", "total", "write"]  # not the bake's
+    assert report["timings"]["total"] == pytest.approx(report["relight"]["seconds"], abs=1e-4)
     bpy.context.scene.radiosity_groups["Spot"].strength = 0.5       # the groups on top
     summed = [colours_and_lux(o) for o in objects]
     monkeypatch.setattr(relight.core, "relight", one)
