@@ -79,6 +79,7 @@ class Kept:
     seconds: dict = field(default_factory=dict)
     kept_mb: float = 0.0         # kept_bytes at keep time (the panel shows it)
     made: dict = field(default_factory=dict)   # relights made together (:func:`_prefetch`)
+    planning: dict = None                      # the relights :func:`_prefetch` plans
     scale: dict = field(default_factory=dict)  # unit index -> (3,): the scene's unit is the
     #                                            kept one (``full``'s) times this (no solve)
 
@@ -194,6 +195,10 @@ def _weights(scene, entry):
 def _relit(entry, emission, back_emission, lights=None):
     """core.relight of the kept bake with this emission (and these lights: cast again), or
     the one :func:`_prefetch` made."""
+    if entry.planning is not None:                  # :func:`_prefetch` plans: a stand-in
+        entry.planning.setdefault(_key(emission, back_emission, lights),
+                                  (emission, back_emission, lights))
+        return entry.template
     made = entry.made.get(_key(emission, back_emission, lights))
     if made is not None:
         return made
@@ -221,37 +226,21 @@ def _key(emission, back_emission, lights):
 
 
 def _prefetch(entry, ks):
-    """Make every relight that the own solutions of units ``ks`` need (as :func:`_unit`,
-    :func:`_own`, :func:`_lit` and :func:`_world` would ask for them) in one
+    """Make every relight that the own solutions of units ``ks`` need in one
     ``core.relight_many``: one matrix assembled and swept for all (core.groups), about twice
-    as fast as one by one. :func:`_relit` hands them out."""
-    todo, own = {}, set(entry.own)
-    dark = _dark(entry)
-    lit = (*dark, None) if entry.lit is None else None
-    world = _world_change(entry)
-    light_units = [j for j, u in enumerate(entry.units) if u.materials is None]
-    for k in ks:
-        if k in entry.basis or len(entry.units) == 1:           # one unit: ``full`` (_unit)
-            continue
-        unit, wanted = entry.units[k], []
-        if unit.materials is not None:
-            only, back = _emission_of(entry, unit)
-            if only is not None:
-                wanted += [(only, back, None)] + ([lit] if light_units else [])
-        elif light_units == [k] and np.array_equal(entry.lights_factor, np.ones(3)):
-            wanted.append(lit)
-        else:
-            if unit.lights and k not in own:
-                others = [j for j in light_units if entry.units[j].lights and j != k]
-                wanted += [lit] if all(j in own for j in others) else \
-                    [(*dark, _alone(entry.lights_ref, unit.lights))]
-                wanted.append(world)
-                own.add(k)
-            if unit.world:
-                wanted.append(world)
-        for change in wanted:
-            if change is not None:
-                todo.setdefault(_key(*change), change)
+    as fast as one by one. The plan is :func:`_unit` itself, run with the kept bake standing in
+    for every relight (:func:`_relit` records what is asked), then undone; :func:`_relit` hands
+    the relights out when :func:`_unit` runs for real."""
+    todo, saved = {}, {name: getattr(entry, name) for name in ("basis", "own", "lit", "world",
+                                                               "seconds")}
+    entry.basis, entry.own, entry.seconds, entry.planning = dict(entry.basis), \
+        dict(entry.own), {}, todo
+    try:
+        for k in ks:
+            _unit(entry, k)
+    finally:
+        entry.planning = None
+        vars(entry).update(saved)
     _make(entry, todo)
 
 
