@@ -98,6 +98,8 @@ def unit_factors(units, old, new):
         else:
             rows = blocks * M + np.asarray(unit.lights, np.int64)
         factor = channel_factor(a[rows], b[rows])
+        if factor is not None and np.allclose(factor, 1.0, rtol=0.0, atol=SAME_RTOL):
+            factor = np.ones(3)               # unchanged (float32 at the Blender boundary)
         if factor is None or (unit.world and not np.array_equal(factor, np.ones(3))):
             return None                       # the world is as baked (Relight reads it)
         free[rows] = False

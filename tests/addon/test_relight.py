@@ -676,3 +676,5 @@ def test_unit_factors_are_one_per_group_and_channel_or_none(package):
     assert same.unit_factors(units, old, (em, None, lights(where=(0.1, 0, 1)))) is None
     assert same.unit_factors(units, old, (em, None, lights((40.0, 60.0)))) is None  # the world
     assert same.unit_factors(units, old, (em, None, None)) is None
+    near = same.unit_factors(units, old, (em * (1 + 1e-7), None, lights()))
+    assert all(np.array_equal(f, np.ones(3)) for f in near.values())   # unchanged: exactly 1
