@@ -497,12 +497,13 @@ def relight(context):
     _check_baked(scene, entry)
     t0 = time.perf_counter()
     emission, back, lights, factor = _read(context, entry)
+    if lights is None:             # every light deleted: the kept ones at no power (factor 0)
+        lights = _alone(entry.lights_ref, ())
     if factor is not None and not np.array_equal(factor, np.ones(3)) \
             and entry.bake_input.scene.world is not None \
             and entry.bake_input.settings.output_mode == "mesh":
         factor = None              # the world cannot leave the lights' solution on this mesh
-        lights = _alone(entry.lights_ref, ()) if lights is None else lights
-    before = dict(vars(entry))
+    before = dict(vars(entry))     # below, ``lights`` is the scene's as _reference's are kept
     scale = unit_factors(entry.units, (entry.emission, entry.back_emission, _reference(entry)),
                          (emission, back, lights))
     if scale is not None:

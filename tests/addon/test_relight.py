@@ -650,6 +650,40 @@ def test_relight_of_a_change_that_is_not_a_group_scaled_solves(package, fixed_cu
     assert_close(relit[1], fresh(objects[1])[0])
 
 
+def test_relight_after_deleting_every_light_is_a_sum_with_the_lights_at_zero(package,
+                                                                            fixed_cubes,
+                                                                            monkeypatch):
+    # Every light deleted is every light's group scaled by 0: a weighted sum of the kept
+    # solutions (the lamp's alone, made by the first Relight), no solve. Oracle: a fresh bake of
+    # the scene without the lights, within the two solves' tolerance (CULL: the culled share).
+    objects, lights = two_lights()
+    lamp = mesh_object("Lamp", *square(0.6, z=1.45, down=True),
+                       material("lamp", emission=(1.0, 1.0, 1.0), strength=4.0,
+                                kind="emission"))
+    objects.append(lamp)
+    bake(shadow_cuts=False)
+    baked = [colours_and_lux(o) for o in objects]
+    for obj in lights:
+        bpy.data.objects.remove(obj)
+    calls, many = [], relight.core.relight_many
+
+    def no_solve(*args, **kw):
+        raise AssertionError("solved")
+
+    monkeypatch.setattr(relight.core, "relight", no_solve)
+    monkeypatch.setattr(relight.core, "relight_many",
+                        lambda result, changes: calls.append(len(changes)) or many(result,
+                                                                                  changes))
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    assert calls == [3]          # the groups' solutions, made once; then only summed
+    assert json.loads(bpy.context.scene.radiosity.last_report)["relight"]["summed"]
+    summed = [colours_and_lux(o) for o in objects]
+    monkeypatch.setattr(relight.core, "relight_many", many)
+    expected = fresh(*objects)
+    assert np.abs(expected[0][1]).max() < 0.9 * np.abs(baked[0][1]).max()   # the lights counted
+    assert_near(summed, expected, baked)
+
+
 def test_unit_factors_are_one_per_group_and_channel_or_none(package):
     same, Unit = PACKAGE.radiosity_addon.same, PACKAGE.radiosity_addon.light_units.Unit
     make = PACKAGE.core.make_lights

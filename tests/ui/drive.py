@@ -121,6 +121,14 @@ def colours():
     return out
 
 
+def stats(rgb):
+    """A mesh's colours in brief (None: it has no Radiosity attribute)."""
+    if rgb is None:
+        return None
+    return {"min": float(rgb.min()), "max": float(rgb.max()),
+            "finite": bool(np.isfinite(rgb).all()), "corners": len(rgb)}
+
+
 def apart(now, baked, factor):
     """max |now - factor x baked| / max |factor x baked| over every mesh (None: meshes differ)."""
     if sorted(now) != sorted(baked) or any(now[k].shape != baked[k].shape for k in now):
@@ -130,13 +138,13 @@ def apart(now, baked, factor):
 
 
 def emission_strengths():
-    """The unlinked emission Strength sockets of every node material."""
+    """The unlinked, lit emission Strength sockets of every node material."""
     out = []
     for mat in bpy.data.materials:
         for node in mat.node_tree.nodes if mat.node_tree else ():
             for key in ("Strength", "Emission Strength"):
                 sock = node.inputs.get(key) if hasattr(node, "inputs") else None
-                if sock is not None and not sock.is_linked:
+                if sock is not None and not sock.is_linked and sock.default_value > 0:
                     out.append(sock)
     return out
 
@@ -202,20 +210,9 @@ def scenario():
     results["bake_seconds"] = time.perf_counter() - t0
     results["progress"] = samples
     yield 0.3
-    meshes = {}
-    for obj in bpy.context.scene.objects:
-        if obj.type != "MESH" or not obj.visible_get():
-            continue
-        attr = obj.data.color_attributes.get("Radiosity")
-        if attr is None:
-            meshes[obj.name] = None
-            continue
-        buf = np.empty(len(attr.data) * 4, np.float32)
-        attr.data.foreach_get("color", buf)
-        rgb = buf.reshape(-1, 4)[:, :3]
-        meshes[obj.name] = {"min": float(rgb.min()), "max": float(rgb.max()),
-                            "finite": bool(np.isfinite(rgb).all()), "corners": len(attr.data)}
-    results["baked"] = meshes
+    rgbs = colours()
+    results["baked"] = {obj.name: stats(rgbs.get(obj.name)) for obj in bpy.context.scene.objects
+                        if obj.type == "MESH" and obj.visible_get()}
     results["last_report"] = bpy.context.scene.radiosity.last_report
     results["show_bake_prop"] = bpy.context.scene.radiosity.show_bake
     results["shading_after_bake"] = shading()
@@ -255,7 +252,7 @@ def scenario():
     # Relight button's operator in the sidebar, then the group's Strength set as its slider sets
     # it (its update writes the mix). Both are compared with the bake's colours.
     baked = colours()
-    strengths = [sock for sock in emission_strengths() if sock.default_value > 0]
+    strengths = emission_strengths()
     for sock in strengths:
         sock.default_value *= 2.0
     with bpy.context.temp_override(window=window, area=area, region=ui):
