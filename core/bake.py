@@ -35,7 +35,7 @@ from .duplicates import (duplicate_warning, fill_duplicate_colours, merge_duplic
 from . import blas, memory, parallel
 from .orient import orient
 from .patches import make_patches, subdivide_patches
-from .pipeline import (check_result, colours, form_factors, gathered_incident, make_gather,
+from .pipeline import (check_result, colours, form_factors, make_gather,
                        node_arrays, solve, with_world)
 from .progress import Monitor, watching
 from .reciprocity import make_reciprocal
@@ -524,7 +524,7 @@ def _back(scene, settings, patches, monitor, t_start, timings, kept, on_contact,
         shown = nodes.shown(sol.node_radiance)       # the transported radiance + exact emission
         room_side = side.room_side(shown)
         gather = kept.gather if kept is not None else None
-        mesh = mesh_report = None
+        mesh = mesh_report = incident = None
         if settings.output_mode == "mesh":
             corner, mesh, gather, mesh_report = mesh_colours(
                 scene, settings, patches, sol.node_radiance, sol.incident, gather, contact_lines,
@@ -536,22 +536,19 @@ def _back(scene, settings, patches, monitor, t_start, timings, kept, on_contact,
             if gather is None:
                 gather = make_gather(side.scene, patches, sol.node_radiance, settings, monitor,
                                      on_contact, direct)
-            corner, element_report = colours(side.scene, patches, sol.node_radiance, settings,
-                                             gather)
+            corner, incident, element_report = colours(side.scene, patches, sol.node_radiance,
+                                                       settings, gather)
         else:
-            corner, element_report = colours(side.scene, side.patches,
-                                             np.concatenate([room_side, shown[P:]]),
-                                             settings, gather)
+            corner, incident, element_report = colours(side.scene, side.patches,
+                                                       np.concatenate([room_side, shown[P:]]),
+                                                       settings, gather)
         corner = fill_duplicate_colours(scene, corner)       # stability (issue 11)
-        incident = None
         if mesh is not None:
             incident = np.zeros((scene.n_corners, 3))
             has = gather.user >= 0
             incident[has] = mesh.corner_incident[gather.user[has]]
+        if incident is not None:
             incident = fill_duplicate_colours(scene, incident)
-        elif settings.corners == "gather":
-            incident = fill_duplicate_colours(
-                scene, gathered_incident(side.scene, sol.node_radiance, gather))
         timings["colours"] = time.perf_counter() - t0
         memory.mark("colours")
     monitor.update(1.0, "done")

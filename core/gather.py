@@ -198,7 +198,7 @@ def gathered_colours(scene, groups, store, node_radiance, fallback, direct=None,
 
     Returns
     -------
-    (C, 3) float64
+    (C, 3) float64, and the light arriving at every group (G, 3) float64 (irradiance / pi)
     """
     incident = store.incident(node_radiance)
     if direct is not None:
@@ -209,7 +209,7 @@ def gathered_colours(scene, groups, store, node_radiance, fallback, direct=None,
     out = np.array(fallback, dtype=np.float64, copy=True)
     ok = groups.group >= 0
     out[ok] = L[groups.group[ok]]
-    return out
+    return out, incident
 
 
 def corner_values(scene, corner_verts, groups, incident):

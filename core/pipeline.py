@@ -511,15 +511,18 @@ def make_gather(scene, patches, node_radiance, settings, monitor, on_contact=Non
 
 
 def colours(scene, patches, node_radiance, settings, gather):
-    """Corner colours (C, 3) and the elements' report (or None).
+    """Corner colours (C, 3), the light arriving at every corner (C, 3: irradiance / pi, zero
+    at the corners of dropped faces; None for ``corners='average'``) and the elements' report
+    (or None).
 
-    ``gather`` (:class:`Gather`) is needed for ``corners='gather'``; ignored for 'average'.
+    ``gather`` (:class:`Gather`) is needed for ``corners='gather'``; ignored for 'average'. The
+    elements' radiance and the gather rows' products are computed once for both.
     """
     P = len(patches.areas)
     patch_radiance = node_radiance[:P]
     if settings.corners != "gather":
         return corner_colours(scene, patches, patch_radiance,
-                              crease_angle=settings.crease_angle), None
+                              crease_angle=settings.crease_angle), None, None
     element_report = None
     seen_radiance = node_radiance
     if gather.elements is not None:
@@ -532,25 +535,12 @@ def colours(scene, patches, node_radiance, settings, gather):
     if np.any(gather.groups.group < 0):
         fallback = corner_colours(scene, patches, patch_radiance,
                                   crease_angle=settings.crease_angle)
-    return gathered_colours(scene, gather.groups, gather.rows, seen_radiance, fallback,
-                            gather.direct, gather.creases), element_report
-
-
-def gathered_incident(scene, node_radiance, gather):
-    """(C, 3) light arriving at every scene corner (irradiance / pi) from the kept gather rows
-    (``corners='gather'``); zero at the corners of dropped faces."""
-    seen_radiance = node_radiance
-    if gather.elements is not None:
-        seen_radiance = gather.elements.node_radiance(scene, node_radiance)
-    inc = gather.rows.incident(seen_radiance)
-    if gather.direct is not None:
-        inc = inc + gather.direct
-    if gather.creases is not None:
-        inc = gather.creases.incident(scene, gather.groups.material, inc, seen_radiance)
-    out = np.zeros((scene.n_corners, 3))
+    corner, inc = gathered_colours(scene, gather.groups, gather.rows, seen_radiance, fallback,
+                                   gather.direct, gather.creases)
+    incident = np.zeros((scene.n_corners, 3))
     ok = gather.groups.group >= 0
-    out[ok] = inc[gather.groups.group[ok]]
-    return out
+    incident[ok] = inc[gather.groups.group[ok]]
+    return corner, incident, element_report
 
 
 def check_result(scene, patches, sol, open_back=None):
