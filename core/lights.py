@@ -322,13 +322,15 @@ class DirectLight:
         np.put_along_axis(out, order, drop, axis=1)
         return out
 
-    def _per_light(self, points, normals, samples, faces=None):
+    def _per_light(self, points, normals, samples, faces=None, dark=False):
         """Per light j: (j, bare, scale, centre), each (n,): ``bare`` the point light's
         cos / d^2 (a sun's cos) before shadows, cone, photometry and soft falloff, ``scale`` the
         factor of the light's colour in the irradiance, ``centre`` the light's centre lights the
         point. Lights culled at a point (:data:`CULL`) cast one ray there. ``faces``
         (n,), the scene face of each point: points that lie under another face (the floor
-        under a box, :class:`core.covered.Covers`) get no light from any light."""
+        under a box, :class:`core.covered.Covers`) get no light from any light. ``dark``:
+        lights of no colour (a light group's relight holds the other groups at 0) are all
+        zeros, not computed (so for callers that weight by the colour only)."""
         normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
         k = self.samples if samples is None else int(samples)
         lt = self.lights
@@ -337,11 +339,19 @@ class DirectLight:
             return
         origin = points + self.offset * normals
         turn = _turn((points - self.lo) / self.extent)   # the same at any scale and place
-        unshadowed = [self._unshadowed(j, origin, normals) for j in range(len(lt))]
+        off = np.zeros(len(self), dtype=bool)
+        if dark:
+            off = ~np.any(self._colours > 0, axis=1)
+        none = (np.zeros(n), np.zeros(n), None, None, 0.0)
+        unshadowed = [none if off[j] else self._unshadowed(j, origin, normals)
+                      for j in range(len(lt))]
         if self.emitters is not None:
             em = self.emitters
-            unshadowed += [(f, f.copy(), None, None, size)
-                           for f, size in zip(em.unshadowed(origin, normals), em.size)]
+            if off[len(lt):].all():
+                unshadowed += [none] * len(em)
+            else:
+                unshadowed += [(f, f.copy(), None, None, size)
+                               for f, size in zip(em.unshadowed(origin, normals), em.size)]
         culled = self._culled(unshadowed)
         under = None if self.covers is None or faces is None \
             else self.covers.points(points, normals, faces)
@@ -352,6 +362,9 @@ class DirectLight:
         cast_frac, cast_clear = np.full((n, m), np.nan), np.zeros((n, m), dtype=bool)
         for j, (bare, scale, ldir, dist, size) in enumerate(unshadowed):
             checkpoint()
+            if unshadowed[j] is none:
+                yield j, bare, scale, np.zeros(n, dtype=bool)
+                continue
             centre = scale > 0
             go = np.flatnonzero(centre & ~culled[:, j])
             few = np.flatnonzero(centre & culled[:, j])
@@ -500,7 +513,7 @@ class DirectLight:
                     # Patches near an emitter: below, from finer points.
                     p, _ = self._near(near, j - n_lights, start)
                     scale[p] = 0.0
-                    if p.size:
+                    if p.size and np.any(self._colour(j) > 0):
                         near_pairs[j] = p
                 elif j < self.lights.n_points:
                     # The unshadowed integral of cos / d^2 over a flat patch is the solid angle
@@ -561,7 +574,7 @@ class DirectLight:
             nrm = np.repeat(patches.normals[part], R, axis=0)
             faces = np.repeat(patches.face[part], R)
             for j, bare, scale, _ in self._per_light(pts.reshape(-1, 3), sign * nrm,
-                                                     PATCH_SAMPLES, faces):
+                                                     PATCH_SAMPLES, faces, dark=True):
                 bare_mean[j, a:a + n] = np.einsum("pr,pr->p", jac, bare.reshape(n, R))
                 scale_mean[j, a:a + n] = np.einsum("pr,pr->p", jac, scale.reshape(n, R))
         for j in range(len(self)):

@@ -5,6 +5,8 @@ lamp over a floor in a black room), an invariance (the same bake with the hemicu
 large lamp: equal on average) and identities (energy balance; relight equals a fresh bake).
 """
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -374,3 +376,45 @@ def test_a_lamp_seen_only_through_a_slit_that_misses_its_probes_reads_dark():
     assert want > 0.005 and got == 0.0
     got, want, _ = seen_through(anchor[1] - 0.05, anchor[1] + 0.05)     # the anchor shows
     assert got == pytest.approx(want, rel=0.25)
+
+
+def test_patch_means_of_a_light_at_zero_are_those_without_it(monkeypatch):
+    """A light group's relight holds the other groups at power 0. Their patch means are then
+    not computed (DirectLight._per_light(dark=True)), and the patches get what they get with
+    those lights absent: a dark point light beside the lamp, then the lamp dark beside the lit
+    point light. Oracle: the same light made without the dark one (equal to rounding: nothing
+    the dark one would add is sampled)."""
+    from core.emitters import Emitters
+    from core.light_list import make_lights
+    from core.lights import DirectLight
+    from core.patches import make_patches
+
+    scene, _ = _room(0.6, box=True)
+    patches = make_patches(scene, 1.0)
+
+    def lamp(on):
+        picked = exact_materials(scene, "all")
+        em = Emitters(scene, patches, picked)
+        if on:
+            return em
+        dark = dataclasses.replace(scene, emission=np.zeros_like(scene.emission))
+        out = em.recoloured(dark, picked)
+        assert out is not None and not np.any(out.colour > 0)
+        return out
+
+    def bulb(power):
+        return make_lights([dict(kind="point", name="Bulb", position=(2.8, 1.0, 2.2),
+                                 power=power)])
+
+    calls = []
+    real = DirectLight._unshadowed
+    monkeypatch.setattr(DirectLight, "_unshadowed",
+                        lambda self, j, *a: calls.append(j) or real(self, j, *a))
+    dark_bulb = DirectLight(bulb(0.0), patches, emitters=lamp(True)).patch_incident(patches)
+    assert calls == []                                  # the dark bulb: not computed
+    alone = DirectLight(None, patches, emitters=lamp(True)).patch_incident(patches)
+    np.testing.assert_allclose(dark_bulb, alone, rtol=1e-12, atol=1e-15)
+    dark_lamp = DirectLight(bulb(60.0), patches, emitters=lamp(False)).patch_incident(patches)
+    bulb_alone = DirectLight(bulb(60.0), patches).patch_incident(patches)
+    assert bulb_alone.max() > 0 and calls
+    np.testing.assert_allclose(dark_lamp, bulb_alone, rtol=1e-12, atol=1e-15)
