@@ -503,7 +503,7 @@ def relight(context):
             and entry.bake_input.scene.world is not None \
             and entry.bake_input.settings.output_mode == "mesh":
         factor = None              # the world cannot leave the lights' solution on this mesh
-    before = dict(vars(entry))     # below, ``lights`` is the scene's as _reference's are kept
+    before = dict(vars(entry))     # ``lights``: the scene's, as _reference(entry) holds them
     scale = unit_factors(entry.units, (entry.emission, entry.back_emission, _reference(entry)),
                          (emission, back, lights))
     if scale is not None:
