@@ -581,6 +581,22 @@ def test_relight_that_moves_the_shadow_lines_bakes_again(package, fixed_cubes):
         assert_close((col, lux), (e_col, e_lux))
 
 
+def lamp_and_two_lights():
+    """:func:`two_lights` and a 0.6 m lamp under the ceiling, baked without shadow lines:
+    (the meshes, the lamp, the lights, each mesh's colours and lux as baked)."""
+    objects, lights = two_lights()
+    lamp = mesh_object("Lamp", *square(0.6, z=1.45, down=True),
+                       material("lamp", emission=(1.0, 1.0, 1.0), strength=4.0,
+                                kind="emission"))
+    objects.append(lamp)
+    bake(shadow_cuts=False)
+    return objects, lamp, lights, [colours_and_lux(o) for o in objects]
+
+
+def no_solve(*args, **kw):
+    raise AssertionError("solved")
+
+
 @pytest.mark.parametrize("cull", [0.0, CULL])
 def test_relight_that_only_scales_groups_is_their_weighted_sum_with_no_solve(package,
                                                                            fixed_cubes,
@@ -591,13 +607,7 @@ def test_relight_that_only_scales_groups_is_their_weighted_sum_with_no_solve(pac
     # the two solves' tolerance and the light culling's share (CULL: a light alone is culled
     # at the points where it is dim, not where the sum is).
     monkeypatch.setattr(PACKAGE.core.lights, "CULL", cull)
-    objects, (bulb, spot) = two_lights()
-    lamp = mesh_object("Lamp", *square(0.6, z=1.45, down=True),
-                       material("lamp", emission=(1.0, 1.0, 1.0), strength=4.0,
-                                kind="emission"))
-    objects.append(lamp)
-    bake(shadow_cuts=False)
-    baked = [colours_and_lux(o) for o in objects]
+    objects, lamp, (bulb, spot), baked = lamp_and_two_lights()
     calls, one, many = [], relight.core.relight, relight.core.relight_many
     monkeypatch.setattr(relight.core, "relight_many",
                         lambda result, changes: calls.append(len(changes)) or many(result,
@@ -606,9 +616,6 @@ def test_relight_that_only_scales_groups_is_their_weighted_sum_with_no_solve(pac
     assert bpy.ops.radiosity.relight() == {"FINISHED"}
     assert calls == [3]          # the lamp alone, the lights, the bulb alone (no world here)
     assert json.loads(bpy.context.scene.radiosity.last_report)["relight"]["summed"]
-
-    def no_solve(*args, **kw):
-        raise AssertionError("solved")
 
     monkeypatch.setattr(relight.core, "relight", no_solve)
     monkeypatch.setattr(relight.core, "relight_many", no_solve)
@@ -656,19 +663,10 @@ def test_relight_after_deleting_every_light_is_a_sum_with_the_lights_at_zero(pac
     # Every light deleted is every light's group scaled by 0: a weighted sum of the kept
     # solutions (the lamp's alone, made by the first Relight), no solve. Oracle: a fresh bake of
     # the scene without the lights, within the two solves' tolerance (CULL: the culled share).
-    objects, lights = two_lights()
-    lamp = mesh_object("Lamp", *square(0.6, z=1.45, down=True),
-                       material("lamp", emission=(1.0, 1.0, 1.0), strength=4.0,
-                                kind="emission"))
-    objects.append(lamp)
-    bake(shadow_cuts=False)
-    baked = [colours_and_lux(o) for o in objects]
+    objects, _, lights, baked = lamp_and_two_lights()
     for obj in lights:
         bpy.data.objects.remove(obj)
     calls, many = [], relight.core.relight_many
-
-    def no_solve(*args, **kw):
-        raise AssertionError("solved")
 
     monkeypatch.setattr(relight.core, "relight", no_solve)
     monkeypatch.setattr(relight.core, "relight_many",
