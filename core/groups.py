@@ -19,7 +19,7 @@ from collections import namedtuple
 import numpy as np
 
 from . import memory, parallel
-from .bake import _LevelMonitor, _back, _front, _prepare, _recomputed
+from .bake import _STAGES, _LevelMonitor, _back, _front, _prepare, _recomputed
 from .pipeline import solve_many
 from .progress import Monitor, watching
 
@@ -73,11 +73,12 @@ def _many(result, changes, progress, cancel):
         if again is not None:
             out[i] = again                   # the shadow lines moved: baked again
             continue
-        monitor = _LevelMonitor(progress, cancel, i, n)
         with parallel.using(state.settings.workers, cancel):
             if state.store is None:          # a matrix-free bake kept no form factors
-                out[i] = _recomputed(scene, state, monitor, t_start)
+                out[i] = _recomputed(scene, state, _LevelMonitor(progress, cancel, i, n),
+                                     t_start)
                 continue
+            monitor = _PhaseMonitor(progress, cancel, i, n)
             front = _Front(*_front(scene, state.settings, state.patches, monitor, state))
         ready.append(_Ready(i, state, scene, t_start, monitor, front))
     clusters = []                            # relights that solve one matrix
@@ -87,11 +88,13 @@ def _many(result, changes, progress, cancel):
             clusters.append([r])
         else:
             cl.append(r)
-    for cl in clusters:
+    for c, cl in enumerate(clusters):
         state = cl[0].state
         t0 = time.perf_counter()
+        monitor = _PhaseMonitor(progress, cancel, c, len(clusters))
+        monitor.stage(*_STAGES["solve"])
         sols = solve_many(cl[0].front.ff, [r.front.nodes for r in cl], state.settings,
-                          Monitor(None, cancel), state.balance)
+                          monitor, state.balance)
         seconds = time.perf_counter() - t0
         memory.mark("solve")
         for r, sol in zip(cl, sols):
@@ -104,6 +107,25 @@ def _many(result, changes, progress, cancel):
             if len(cl) > 1:
                 out[r.i].report["shared_solve"] = dict(relights=len(cl), seconds=seconds)
     return out
+
+
+class _PhaseMonitor(Monitor):
+    """The progress of part ``k`` of ``n`` in each phase of the bake's bar (core.bake._STAGES):
+    the fronts (patches and form factors), the solves, the colours. Every relight's front runs
+    before the shared solve and every colours after it, so each phase is split into ``n`` equal
+    parts and the bar only moves on."""
+
+    PHASES = ((_STAGES["patches"][0], _STAGES["form_factors"][1]), _STAGES["solve"],
+              _STAGES["colours"])
+
+    def __init__(self, progress, cancel, k, n):
+        super().__init__(progress, cancel)
+        self._k, self._n = k, n
+
+    def stage(self, lo, hi):
+        p0, p1 = next(p for p in self.PHASES if p[0] <= lo and hi <= p[1])
+        at = p0 + self._k * (p1 - p0) / self._n
+        super().stage(at + (lo - p0) / self._n, at + (hi - p0) / self._n)
 
 
 def _same_matrix(a, b):

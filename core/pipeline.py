@@ -398,14 +398,19 @@ def _solve_dense(ff, nodes_list, settings, solver, monitor, kept=None):
     if solver == "gauss_seidel":
         results = solve_gauss_seidel_many(F, rho[idx], les,
                                           max_iterations=settings.max_iterations, **common)
-    elif solver == "direct":
-        results = [solve_direct(F, rho[idx], le, monitor=monitor) for le in les]
-    elif solver == "jacobi":
-        results = [solve_jacobi(F, rho[idx], le, max_iterations=settings.max_iterations,
-                                **common) for le in les]
-    else:
-        results = [solve_progressive(None, areas[idx], rho[idx], le, F=F, max_shots=settings.
-                                     max_iterations * max(n_a, 1), **common) for le in les]
+    else:                                   # one solve per emission, each its part of the bar
+        results = []
+        for g, le in enumerate(les):
+            with monitor.part(g, len(les)):
+                if solver == "direct":
+                    results.append(solve_direct(F, rho[idx], le, monitor=monitor))
+                elif solver == "jacobi":
+                    results.append(solve_jacobi(F, rho[idx], le, max_iterations=settings.
+                                                max_iterations, **common))
+                else:
+                    results.append(solve_progressive(
+                        None, areas[idx], rho[idx], le, F=F,
+                        max_shots=settings.max_iterations * max(n_a, 1), **common))
     # incident power per node (radiance x area), for the energy balance and the warnings
     H = np.zeros((N, 3 * len(les)))
     H[idx] = matvec(F, np.concatenate([res.radiance for res in results], axis=1))

@@ -33,6 +33,17 @@ class Monitor:
         """Map the fractions of the next updates onto [lo, hi] of the whole bake."""
         self._lo, self._hi = float(lo), float(hi)
 
+    @contextlib.contextmanager
+    def part(self, k, n):
+        """Within the block, the updates map onto part ``k`` of ``n`` equal parts of the current
+        stage (several solves in one stage: core.groups), then onto the whole stage again."""
+        lo, hi = self._lo, self._hi
+        Monitor.stage(self, lo + (hi - lo) * k / n, lo + (hi - lo) * (k + 1) / n)
+        try:
+            yield self
+        finally:
+            Monitor.stage(self, lo, hi)
+
     def check(self):
         """Raise BakeCancelled if the cancel check says so."""
         if self._cancel is not None and self._cancel():

@@ -85,3 +85,22 @@ def test_a_wrong_change_is_named_before_any_work(baked):
         relight_many(base, [dict(emission=None), dict(emmision=np.zeros((3, 3)))])
     with pytest.raises(ValueError, match="emission must have shape"):
         relight_many(base, [dict(emission=np.zeros((2, 3)))])
+
+
+@pytest.mark.parametrize("solver", ["gauss_seidel", "direct"])
+def test_the_progress_bar_of_relights_together_only_moves_on(baked, solver):
+    # Every relight's lights and form factors run first, then the shared solve (one per
+    # emission with the direct solver), then every relight's colours: each phase is split
+    # among the relights, so the bar never moves back (the add-on's bake shows it, issue 12).
+    scene, base = baked
+    if solver == "direct":
+        base = bake(scene, BakeSettings(exact_direct="all", vertex_budget=1500, solver=solver))
+    dark = [dict(BULB, power=0.0), dict(SPOT, power=0.0)]
+    seen = []
+    relight_many(base, [dict(emission=_dark(scene), lights=[BULB, dark[1]]),
+                        dict(emission=_dark(scene), lights=[dark[0], SPOT]),
+                        dict(lights=dark)],
+                 progress=lambda fraction, message: seen.append((fraction, message)))
+    fractions = [f for f, _ in seen]
+    assert fractions == sorted(fractions) and fractions[-1] == 1.0
+    assert [m for _, m in seen].count("colours") == 3           # each relight's own part
