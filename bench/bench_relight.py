@@ -21,8 +21,12 @@ print their CPU seconds too (``*_cpu_s``, this process: fairer on a busy machine
 bake's reciprocity scaling was reused (no Sinkhorn sweep) and the solver's sweeps
 (``relight_reused``).
 
+``--panel``: bake as the panel's button does (operators.panel_job): the worker makes every light
+group's own solution after the core bake (``light_groups_in_bake_s``), so the first Relight is a
+weighted sum; without it, as the operator's execute (scripts) bakes: the first Relight makes them.
+
 Run: ``.venv/bin/python bench/bench_relight.py [--scenes cornell_box office generated]
-[--patches 10000]``. Prints one JSON line per scene (seconds per step, the kept MB, the groups).
+[--patches 10000] [--panel]``. Prints one JSON line per scene (seconds per step, the kept MB, the groups).
 """
 
 import argparse
@@ -133,7 +137,22 @@ def _reused():
                 iterations=report.get("iterations"))
 
 
-def run(name, patches=10000, exact_direct=None):
+def _bake(panel):
+    """Bake as the operator's execute does (scripts), or with ``panel`` as the panel's button
+    does (operators.panel_job: the worker makes every light group's solution after the bake)."""
+    if not panel:
+        assert bpy.ops.radiosity.bake() == {"FINISHED"}
+        return
+    addon, ctx = PACKAGE.radiosity_addon, bpy.context
+    bake_input = addon.job.prepare(ctx, addon.job.options_from_props(ctx.scene.radiosity))
+    work = addon.operators.panel_job(ctx, bake_input).start()
+    work.join()
+    if work.error is not None:
+        raise work.error
+    addon.job.apply(ctx, bake_input, work.result, ready=work.ready, warnings=work.warnings)
+
+
+def run(name, patches=10000, exact_direct=None, panel=False):
     if name == "generated":
         size = generated(patches)
         settings = bpy.context.scene.radiosity
@@ -145,7 +164,7 @@ def run(name, patches=10000, exact_direct=None):
                                  load_ui=False)
     relight = PACKAGE.radiosity_addon.relight
     t0 = time.perf_counter()
-    assert bpy.ops.radiosity.bake() == {"FINISHED"}
+    _bake(panel)
     bake = time.perf_counter() - t0
     report = json.loads(bpy.context.scene.radiosity.last_report)
     for sock in emissive_inputs():
@@ -183,7 +202,8 @@ def run(name, patches=10000, exact_direct=None):
         groups[lights[0]].strength = 0.5
         extra["group_light_first_s"] = round(time.perf_counter() - t0, 3)
     extra.update(_every_group(relight, entry))
-    return dict(scene=name, bake_s=round(bake, 2),
+    return dict(scene=name, panel=panel, bake_s=round(bake, 2),
+                light_groups_in_bake_s=round(report["timings"].get("light_groups", 0.0), 3),
                 bake_core_s=round(report["timings"]["total"], 2),
                 bake_solve_s=round(report["timings"].get("solve", 0.0), 3), **extra,
                 relight_s=round(relit, 3), group_first_s=round(first, 3),
@@ -256,10 +276,14 @@ def main():
                         help="about how many patches the generated scene has (default 10000)")
     parser.add_argument("--exact-direct", choices=["auto", "all", "off"],
                         help="the generated scene's Exact Emitters (default: the add-on's, auto)")
+    parser.add_argument("--panel", action="store_true",
+                        help="bake as the panel's button does: every light group's solution is "
+                             "made in the bake (light_groups_in_bake_s), so the first Relight "
+                             "is a sum")
     args = parser.parse_args()
     PACKAGE.register()
     for name in args.scenes:
-        print(json.dumps(run(name, args.patches, args.exact_direct)), flush=True)
+        print(json.dumps(run(name, args.patches, args.exact_direct, args.panel)), flush=True)
 
 
 if __name__ == "__main__":

@@ -7,7 +7,7 @@ import bpy
 from ..core.errors import BakeCancelled
 from .job import BakeError, BakeJob, apply, bake_now, options_from_props, prepare
 from .luxview import hide as hide_lux
-from .relight import drop as drop_kept
+from .relight import drop as drop_kept, units_of
 from .write import clear_bake
 
 #: Seconds between modal timer ticks: progress refresh and the latency of Esc (the worker itself
@@ -19,6 +19,12 @@ def _summary_line(report):
     return (f"Radiosity baked: {report.get('patches', '?')} patches, "
             f"{report.get('iterations', '?')} iterations, "
             f"{report.get('timings', {}).get('total', 0.0):.2f} s")
+
+
+def panel_job(context, bake_input):
+    """The panel's bake in a worker: the core bake, then every light group's own solution (so
+    its first Relight or group change is a weighted sum; main thread: the groups are read)."""
+    return BakeJob(bake_input, units_of(context.scene, bake_input))
 
 
 class _Running:
@@ -79,7 +85,7 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
         wm = context.window_manager
-        _Running.job = BakeJob(bake_input).start()
+        _Running.job = panel_job(context, bake_input).start()
         _Running.timer = wm.event_timer_add(TIMER_INTERVAL, window=context.window)
         wm.radiosity_progress = 0.0
         wm.radiosity_status = "Starting"
@@ -145,7 +151,8 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
             self.report({"ERROR"}, f"Radiosity bake failed: {job.error}")
             return {"CANCELLED"}
         try:
-            report = apply(context, job.bake_input, job.result)
+            report = apply(context, job.bake_input, job.result, ready=job.ready,
+                           warnings=job.warnings)
         except BakeError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}

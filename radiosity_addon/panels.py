@@ -22,6 +22,7 @@ STAGE_LABELS = (
     ("form_factors", "Form factors"),
     ("solve", "Solve"),
     ("colours", "Vertex colours"),
+    ("light_groups", "Light groups"),
     ("write", "Write"),
 )
 

@@ -21,17 +21,19 @@ again.
   once that solution is kept. A group is each emissive material (area lights are emissive
   polygons), each point, spot and sun light (named after its object) and the world ("World");
   Blender's light groups (``Object.lightgroup``, ``World.lightgroup``) merge what they hold.
-  The groups' own solutions are made when a group is first weighted, every group's at once
-  (:func:`_prefetch`: one ``core.relight_many``, one matrix swept for all): a material's
-  emission alone, a light alone (the others at power 0: its shadow rays read back), no light for
-  the world. On the radiosity mesh too: the mesh is kept. A Relight with groups weighted makes
-  only theirs.
+  The groups' own solutions are made every group's at once (:func:`_prefetch`: one
+  ``core.relight_many``, one matrix swept for all): by the panel's bake in its worker, after the
+  core bake (:func:`prepared`), so its first Relight or group change solves nothing; otherwise
+  when a group is first weighted. A material's emission alone, a light alone (the others at
+  power 0: its shadow rays read back), no light for the world. On the radiosity mesh too: the
+  mesh is kept. A Relight with groups weighted makes only theirs.
 
 The colours are written by ``job.apply``, exactly as a bake writes them.
 """
 
 import json
 import time
+import traceback
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 
@@ -39,22 +41,14 @@ import bpy
 import numpy as np
 
 from .. import core
-from ..core.errors import RadiosityError
+from ..core.errors import BakeCancelled, RadiosityError
 from . import job, surfaces
-from .extract import ATTRIBUTE, extract
 from .light_units import Solution, units as light_units
-from .same import lights_factor as _lights_factor, same as _same, unit_factors
+from .same import BAKE_AGAIN, RelightError, check_baked, read, unit_factors
 
-
-#: What the user is told whenever the kept bake cannot serve.
-BAKE_AGAIN = "bake again"
 
 _KEPT = {}
 _TOO_BIG = {}     # session uid -> (MB the last bake would have kept, the memory budget in MB)
-
-
-class RelightError(job.BakeError):
-    """Relight cannot run; the message is for the user."""
 
 
 @dataclass
@@ -80,6 +74,7 @@ class Kept:
     kept_mb: float = 0.0         # kept_bytes at keep time (the panel shows it)
     made: dict = field(default_factory=dict)   # relights made together (:func:`_prefetch`)
     planning: dict = None                      # the relights :func:`_prefetch` plans
+    calls: dict = field(default_factory=dict)  # progress, cancel of its core calls (the worker)
     scale: dict = field(default_factory=dict)  # unit index -> (3,): the scene's unit is the
     #                                            kept one (``full``'s) times this (no solve)
 
@@ -89,17 +84,13 @@ def kept(scene):
     return _KEPT.get(scene.session_uid)
 
 
-def keep(scene, bake_input, result):
-    """Keep a bake for relight and list its light groups on the scene (after job.apply)."""
-    arrays = bake_input.scene
-    units = light_units(bake_input, scene)
-    _KEPT[scene.session_uid] = Kept(
-        bake_input, result, bool(scene.radiosity.selected_only), units,
-        np.array(arrays.emission), None if arrays.back_emission is None
-        else np.array(arrays.back_emission), lights_ref=arrays.lights, template=result,
-        full=Solution.of(result, bake_input.extraction.surfaces))
-    _ops().set_groups(scene, [u.group for u in units])
-    entry = _KEPT[scene.session_uid]
+def keep(scene, bake_input, result, ready=None):
+    """Keep a bake for relight and list its light groups on the scene (after job.apply).
+    ``ready``: the Kept that :func:`prepared` made of this bake in its worker, if any."""
+    entry = ready if ready is not None and ready.result is result else _entry(
+        bake_input, result, light_units(bake_input, scene))
+    _KEPT[scene.session_uid] = entry
+    _ops().set_groups(scene, [u.group for u in entry.units])
     size = kept_bytes(entry)
     entry.kept_mb = size / 2 ** 20
     budget = kept_budget(bake_input)
@@ -109,6 +100,47 @@ def keep(scene, bake_input, result):
         # budget they are not kept, and Relight says why.
         drop(scene)
         _TOO_BIG[scene.session_uid] = (size / 2 ** 20, budget / 2 ** 20)
+
+
+def _entry(bake_input, result, units):
+    arrays = bake_input.scene
+    return Kept(bake_input, result, bake_input.selected_only, units, np.array(arrays.emission),
+                None if arrays.back_emission is None else np.array(arrays.back_emission),
+                lights_ref=arrays.lights, template=result,
+                full=Solution.of(result, bake_input.extraction.surfaces))
+
+
+def units_of(scene, bake_input):
+    """The light groups' units of a bake about to run (main thread: they read Blender's light
+    groups), for :func:`prepared` in its worker; None when the scene lists no groups."""
+    if not hasattr(scene, "radiosity_groups"):
+        return None
+    try:
+        return light_units(bake_input, scene)
+    except Exception:       # a bug there must not stop the bake: keep() reads them again
+        traceback.print_exc()
+        return None
+
+
+def prepared(bake_input, result, units, progress=None, cancel=None):
+    """The Kept of a bake with every light group's own solution made (any thread: the panel's
+    bake makes them in its worker, so its first Relight or group change is a weighted sum with
+    no solve); None when there is nothing to make (one group), it would not be kept (above
+    the memory budget) or a group alone re-meshes (the first Relight then solves, as before).
+    ``progress``, ``cancel``: as core.relight_many's (core.BakeCancelled when cancelled)."""
+    entry = _entry(bake_input, result, units)
+    if len(units) < 2 or kept_bytes(entry) > kept_budget(bake_input):
+        return None
+    t0 = time.perf_counter()
+    entry.calls = dict(progress=progress, cancel=cancel)
+    try:
+        _solutions(entry, range(len(units)))
+    except RelightError:
+        return None
+    finally:
+        entry.calls = {}
+    entry.seconds["prepared in the bake"] = time.perf_counter() - t0
+    return entry
 
 
 def kept_budget(bake_input):
@@ -203,7 +235,10 @@ def _relit(entry, emission, back_emission, lights=None):
     if made is not None:
         return made
     try:
-        return core.relight(entry.result, **_change(emission, back_emission, lights))
+        return core.relight(entry.result, **_change(emission, back_emission, lights),
+                            **entry.calls)
+    except BakeCancelled:
+        raise
     except (RadiosityError, ValueError) as exc:
         raise RelightError(f"Relight failed: {exc}") from exc
 
@@ -270,7 +305,10 @@ def _make(entry, todo):
         return                   # one relight: core.relight, as it comes
     t0 = time.perf_counter()
     try:
-        made = core.relight_many(entry.result, [_change(*c) for c in todo.values()])
+        made = core.relight_many(entry.result, [_change(*c) for c in todo.values()],
+                                 **entry.calls)
+    except BakeCancelled:
+        raise
     except (RadiosityError, ValueError) as exc:
         raise RelightError(f"Relight failed: {exc}") from exc
     entry.made = dict(zip(todo, made))
@@ -382,6 +420,16 @@ def _own(entry, k):
     return entry.own[k]
 
 
+def _solutions(entry, order):
+    """Make the own solutions of units ``order`` (:func:`_unit`), at once (:func:`_prefetch`)."""
+    try:
+        _prefetch(entry, order)
+        for k in order:              # in the order _prefetch planned (a light's own solution
+            _unit(entry, k)          # may be the rest of the lights': core.lights.CULL)
+    finally:
+        entry.made = {}
+
+
 def _same_mesh(entry, relit):
     """Group solutions add up only on one radiosity mesh."""
     a, b = entry.template.output, relit.output
@@ -402,59 +450,12 @@ def _mixed(entry, weights, every=False):
     order = wanted
     if every and any(k not in entry.basis for k in wanted):
         order = range(len(entry.units))
-    try:
-        _prefetch(entry, order)
-        for k in order:              # in the order _prefetch planned (a light's own solution
-            _unit(entry, k)          # may be the rest of the lights': core.lights.CULL)
-    finally:
-        entry.made = {}
+    _solutions(entry, order)
     total = entry.full
     for k in wanted:
         sol = entry.basis[k]
         total = total if sol is None else total.combine(sol, w[k] - 1.0)
     return total
-
-
-# ----------------------------------------------------------------------------- the scene
-
-
-def _read(context, entry):
-    """Re-read the scene: (emission (M, 3), back emission (M, 3) or None, the lights (core
-    Lights or None), their factor from the kept ones (:func:`_lights_factor`: (3,) or None));
-    RelightError if anything else changed."""
-    try:
-        ext = extract(context.evaluated_depsgraph_get(), selected_only=entry.selected_only)
-    except RadiosityError as exc:
-        raise RelightError(str(exc)) from exc
-    old = entry.bake_input.extraction.arrays
-    new = ext.arrays
-    if [p.object_name for p in ext.parts] != [p.object_name for p in
-                                               entry.bake_input.extraction.parts]:
-        raise RelightError(f"Relight: the baked objects changed; {BAKE_AGAIN}")
-    for key in sorted(set(old) | set(new)):
-        if key in ("emission", "back_emission", "lights"):
-            continue
-        if not _same(old.get(key), new.get(key)):
-            what = {"vertices": "geometry", "corner_verts": "geometry",
-                    "face_starts": "geometry", "face_sizes": "geometry",
-                    "reflectance": "material colours", "back_reflectance": "material colours",
-                    "face_materials": "material assignment"}.get(key, key.replace("_", " "))
-            raise RelightError(f"Relight: the {what} changed since the bake "
-                               f"(Relight takes new lights and emission strength and colour "
-                               f"only); {BAKE_AGAIN}")
-    emission = np.asarray(new["emission"], dtype=np.float64)
-    back = new.get("back_emission")
-    if (back is None) != (old.get("back_emission") is None):
-        raise RelightError(f"Relight: the one-sided emitters changed; {BAKE_AGAIN}")
-    newly = np.any(emission > 0, axis=1) & ~np.any(np.asarray(old["emission"]) > 0, axis=1)
-    if newly.any():
-        names = new.get("material_names") or ()
-        which = ", ".join(f"'{names[m]}'" for m in np.flatnonzero(newly)[:3] if m < len(names))
-        raise RelightError(f"Relight: material {which} emits now and did not at the bake "
-                           f"(its light needs its own patches and form factors); {BAKE_AGAIN}")
-    lights = new.get("lights")
-    return emission, None if back is None else np.asarray(back, np.float64), lights, \
-        _lights_factor(entry.lights_ref, lights)
 
 
 def _write(context, entry, solution, seconds, summed=False):
@@ -494,9 +495,9 @@ def relight(context):
                            f"kept in the saved file); {BAKE_AGAIN}")
     if context.mode != "OBJECT":
         raise RelightError("Switch to Object Mode to relight")
-    _check_baked(scene, entry)
+    check_baked(scene, entry)
     t0 = time.perf_counter()
-    emission, back, lights, factor = _read(context, entry)
+    emission, back, lights, factor = read(context, entry)
     if lights is None:             # every light deleted: the kept ones at no power (factor 0)
         lights = _alone(entry.lights_ref, ())
     if factor is not None and not np.array_equal(factor, np.ones(3)) \
@@ -550,18 +551,6 @@ def _reference(entry):
     if ref is None or not len(ref):
         return ref
     return replace(ref, intensity=ref.intensity * f, sun_irradiance=ref.sun_irradiance * f)
-
-
-def _check_baked(scene, entry):
-    """The kept bake's objects still show it (not undone, not cleared by hand)."""
-    for part in entry.bake_input.extraction.parts:
-        obj = scene.objects.get(part.object_name)
-        if obj is None or obj.type != "MESH":
-            raise RelightError(f"Relight: object '{part.object_name}' of the bake is gone; "
-                               f"{BAKE_AGAIN}")
-        if ATTRIBUTE not in obj.data.color_attributes:
-            raise RelightError(f"Relight: object '{obj.name}' no longer shows the bake (undone "
-                               f"or cleared); {BAKE_AGAIN}")
 
 
 def _same_mesh_or_new(entry, relit, scaled):

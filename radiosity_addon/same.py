@@ -1,7 +1,12 @@
-"""What Relight compares: a value of the re-read scene against the kept bake's, and the kept
-lights against the scene's (one factor per colour channel, or a cast again)."""
+"""What Relight compares: the scene re-read against the kept bake (:func:`read`: only the
+light may have changed), a value of it against the kept one's, and the kept lights against the
+scene's (one factor per colour channel, or a cast again)."""
 
 import numpy as np
+
+from ..core.errors import RadiosityError
+from . import job
+from .extract import ATTRIBUTE, extract
 
 #: Two values of a re-read scene are "unchanged" within this relative difference (float32 at the
 #: Blender boundary; the lights' factor is one per colour channel for all of them).
@@ -105,3 +110,65 @@ def unit_factors(units, old, new):
         free[rows] = False
         out[k] = factor
     return out if same(a[free], b[free]) else None
+
+
+# ----------------------------------------------------------------------------- the scene
+
+
+#: What the user is told whenever the kept bake cannot serve.
+BAKE_AGAIN = "bake again"
+
+
+class RelightError(job.BakeError):
+    """Relight cannot run; the message is for the user."""
+
+
+def read(context, entry):
+    """Re-read the scene: (emission (M, 3), back emission (M, 3) or None, the lights (core
+    Lights or None), their factor from the kept ones (:func:`lights_factor`: (3,) or None));
+    RelightError if anything else changed."""
+    try:
+        ext = extract(context.evaluated_depsgraph_get(), selected_only=entry.selected_only)
+    except RadiosityError as exc:
+        raise RelightError(str(exc)) from exc
+    old = entry.bake_input.extraction.arrays
+    new = ext.arrays
+    if [p.object_name for p in ext.parts] != [p.object_name for p in
+                                               entry.bake_input.extraction.parts]:
+        raise RelightError(f"Relight: the baked objects changed; {BAKE_AGAIN}")
+    for key in sorted(set(old) | set(new)):
+        if key in ("emission", "back_emission", "lights"):
+            continue
+        if not same(old.get(key), new.get(key)):
+            what = {"vertices": "geometry", "corner_verts": "geometry",
+                    "face_starts": "geometry", "face_sizes": "geometry",
+                    "reflectance": "material colours", "back_reflectance": "material colours",
+                    "face_materials": "material assignment"}.get(key, key.replace("_", " "))
+            raise RelightError(f"Relight: the {what} changed since the bake "
+                               f"(Relight takes new lights and emission strength and colour "
+                               f"only); {BAKE_AGAIN}")
+    emission = np.asarray(new["emission"], dtype=np.float64)
+    back = new.get("back_emission")
+    if (back is None) != (old.get("back_emission") is None):
+        raise RelightError(f"Relight: the one-sided emitters changed; {BAKE_AGAIN}")
+    newly = np.any(emission > 0, axis=1) & ~np.any(np.asarray(old["emission"]) > 0, axis=1)
+    if newly.any():
+        names = new.get("material_names") or ()
+        which = ", ".join(f"'{names[m]}'" for m in np.flatnonzero(newly)[:3] if m < len(names))
+        raise RelightError(f"Relight: material {which} emits now and did not at the bake "
+                           f"(its light needs its own patches and form factors); {BAKE_AGAIN}")
+    lights = new.get("lights")
+    return emission, None if back is None else np.asarray(back, np.float64), lights, \
+        lights_factor(entry.lights_ref, lights)
+
+
+def check_baked(scene, entry):
+    """The kept bake's objects still show it (not undone, not cleared by hand)."""
+    for part in entry.bake_input.extraction.parts:
+        obj = scene.objects.get(part.object_name)
+        if obj is None or obj.type != "MESH":
+            raise RelightError(f"Relight: object '{part.object_name}' of the bake is gone; "
+                               f"{BAKE_AGAIN}")
+        if ATTRIBUTE not in obj.data.color_attributes:
+            raise RelightError(f"Relight: object '{obj.name}' no longer shows the bake (undone "
+                               f"or cleared); {BAKE_AGAIN}")

@@ -691,7 +691,7 @@ def _start_modal():
     ops = PACKAGE.radiosity_addon.operators
     ctx = bpy.context
     bake_input = job.prepare(ctx, job.options_from_props(ctx.scene.radiosity))
-    ops._Running.job = job.BakeJob(bake_input).start()
+    ops._Running.job = ops.panel_job(ctx, bake_input).start()      # as invoke starts it
     return ops
 
 

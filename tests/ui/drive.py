@@ -8,7 +8,8 @@ Steps run from ``bpy.app.timers`` (the event loop keeps running between them, as
 open the sidebar on the Radiosity tab, start the bake as the button does (``INVOKE_DEFAULT`` in
 the 3D view's context), press Esc with xdotool in the middle, start it again and watch the progress
 until it ends, toggle Show Bake, take screenshots with ImageMagick's ``import -window root``,
-press Relight after doubling the lamp and set a light group's strength, disable and re-enable
+press Relight after doubling the lamp and a bulb added before the bakes (two light groups, made
+in the bake's worker) and set the groups' strengths, disable and re-enable
 the extension, and quit in the middle of a third bake. Every observation
 goes to OUT_DIR/results.json; tests/ui/test_ui.py judges them. Nothing here asserts.
 """
@@ -169,6 +170,12 @@ def scenario():
     yield 0.5
     results["sidebar"] = {"category": ui.active_panel_category, "width": ui.width,
                           "ui_scale": prefs.system.ui_scale}
+    # A point light beside the ceiling lamp, as users light a room: two light groups, so the
+    # bake's worker makes each group's own solution after the core bake (the panel's status
+    # says "Light groups") and the first Relight below is their weighted sum.
+    bulb = bpy.data.objects.new("Bulb", bpy.data.lights.new("Bulb", "POINT"))
+    bulb.data.energy, bulb.location = 5.0, (0.28, 0.2, 0.4)
+    bpy.context.scene.collection.objects.link(bulb)
     results["shading_before"] = shading()
     screenshot("before_bake.png")
     before = snapshot()
@@ -248,13 +255,15 @@ def scenario():
     yield 0.5
     results["lux_shading_off"] = shading()
 
-    # Relight and a light group's slider, as after a bake: the lamp's strength doubled, the
-    # Relight button's operator in the sidebar, then the group's Strength set as its slider sets
-    # it (its update writes the mix). Both are compared with the bake's colours.
+    # Relight and the light groups' sliders, as after a bake: the lamp's strength and the
+    # bulb's power doubled, the Relight button's operator in the sidebar, then each group's
+    # Strength set as its slider sets it (its update writes the mix). Both are compared with the
+    # bake's colours.
     baked = colours()
     strengths = emission_strengths()
     for sock in strengths:
         sock.default_value *= 2.0
+    bulb.data.energy *= 2.0
     with bpy.context.temp_override(window=window, area=area, region=ui):
         results["relight"] = sorted(bpy.ops.radiosity.relight("INVOKE_DEFAULT"))
     redraw()
@@ -265,13 +274,16 @@ def scenario():
     groups = bpy.context.scene.radiosity_groups
     results["groups"] = [g.name for g in groups]
     if len(groups):
-        groups[0].strength = 0.5
+        for group in groups:
+            group.strength = 0.5
         redraw()
         yield 1.0
         results["group_error"] = apart(colours(), baked, 1.0)
-        groups[0].strength = 1.0
+        for group in groups:
+            group.strength = 1.0
     for sock in strengths:
         sock.default_value *= 0.5
+    bulb.data.energy *= 0.5
     yield 0.3
 
     # The light's panel: a spot light made active, Properties > Light data shows its Radiosity

@@ -141,19 +141,24 @@ def test_light_panel_shows_for_a_spot_light(session):
     assert results["light_panel_poll"] is True
 
 
-#: Relight and the group slider against the bake: the Cornell box has one light group, so the
-#: lamp x 2 is the bake x 2 and the group at 0.5 the bake (the group's solution is the bake's; a
-#: factor of 2 is exact in floating point), up to the float32 colour attribute.
+#: Relight and the group sliders against the bake: every light x 2 is the bake x 2 and every
+#: group at 0.5 then the bake (the groups' own solutions add up to the bake by construction: the
+#: last light's is the lights' solution less the others'; a factor of 2 is exact in floating
+#: point), up to the float32 colour attribute.
 RELIGHT_RTOL = 1e-5
 
 
-def test_relight_button_and_a_group_slider_rewrite_the_colours(session):
-    """After the lamp's strength is doubled, Relight in the real window writes twice the bake
-    (a weighted sum, no solve); the group's Strength at 0.5 then writes the bake again."""
+def test_relight_button_and_the_group_sliders_rewrite_the_colours(session):
+    """The bake with a lamp and a bulb made both groups' own solutions in its worker (the status
+    and the report say so); after every light is doubled, Relight in the real window writes
+    twice the bake (a weighted sum, no solve); every group's Strength at 0.5 then writes the
+    bake again."""
     results, _ = session
+    assert any(s.startswith("Light groups") for _, _, s in results["progress"])
+    assert json.loads(results["last_report"])["timings"]["light_groups"] > 0.0
     assert results["relight"] == ["FINISHED"]
     assert results["relight_report"]["summed"] is True
-    assert results["groups"] == ["light"]
+    assert results["groups"] == ["light", "Bulb"]
     assert results["relight_error"] is not None and results["relight_error"] < RELIGHT_RTOL
     assert results["group_error"] is not None and results["group_error"] < RELIGHT_RTOL
 
