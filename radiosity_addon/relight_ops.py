@@ -97,6 +97,9 @@ class RADIOSITY_OT_relight(bpy.types.Operator):
         return context.scene is not None and not RADIOSITY_OT_bake.running()
 
     def execute(self, context):
+        window = context.window          # a Relight that solves blocks (seconds at 10k patches)
+        if window is not None:
+            window.cursor_modal_set("WAIT")
         try:
             report = relight.relight(context)
         except job.BakeError as exc:           # RelightError, or writing failed
@@ -106,6 +109,9 @@ class RADIOSITY_OT_relight(bpy.types.Operator):
             traceback.print_exc()
             self.report({"ERROR"}, f"Relight failed ({type(exc).__name__}): {exc}")
             return {"CANCELLED"}
+        finally:
+            if window is not None:
+                window.cursor_modal_restore()
         _ERRORS.pop(context.scene.session_uid, None)
         for warning in report.get("warnings", []):
             self.report({"WARNING"}, warning)
