@@ -701,12 +701,7 @@ def test_modal_timer_ticks_drive_the_bake_to_its_end(package):
     ops = _start_modal()
     assert ops.RADIOSITY_OT_bake.running() and not ops.RADIOSITY_OT_bake.poll(bpy.context)
     me = _Operator()
-    t0, result = time.perf_counter(), None
-    while time.perf_counter() - t0 < 60:
-        result = _modal(me, _Event("TIMER"))
-        if result != {"PASS_THROUGH"}:
-            break
-        time.sleep(0.02)
+    result, _ = drive(me, 60.0)
     assert result == {"FINISHED"}, me.reports
     assert "Radiosity" in floor.data.color_attributes
     assert not ops.RADIOSITY_OT_bake.running() and ops.RADIOSITY_OT_bake.poll(bpy.context)
@@ -720,12 +715,8 @@ def test_modal_escape_cancels_and_changes_nothing(package):
     ops = _start_modal()
     me = _Operator()
     assert _modal(me, _Event("ESC", "PRESS")) == {"RUNNING_MODAL"}
-    t0, result = time.perf_counter(), None
-    while time.perf_counter() - t0 < 5:
-        result = _modal(me, _Event("TIMER"))
-        if result != {"PASS_THROUGH"}:
-            break
-        time.sleep(0.02)
+    t0 = time.perf_counter()
+    result, _ = drive(me, 5.0)
     assert result == {"CANCELLED"} and time.perf_counter() - t0 < 1.0
     assert not ops.RADIOSITY_OT_bake.running()
     assert _snapshot() == before
@@ -742,6 +733,18 @@ def test_unregister_mid_bake_stops_the_worker(package):
         assert work.done() and work.cancelled and not ops.RADIOSITY_OT_bake.running()
     finally:
         PACKAGE.register()
+
+
+def drive(me=None, seconds=120.0):
+    """Tick the modal bake that _start_modal started until it ends (or ``seconds`` pass):
+    (its last result, the reports of ``me``, the stand-in operator)."""
+    me, t0, result = me or _Operator(), time.perf_counter(), None
+    while time.perf_counter() - t0 < seconds:
+        result = _modal(me, _Event("TIMER"))
+        if result != {"PASS_THROUGH"}:
+            break
+        time.sleep(0.02)
+    return result, me.reports
 
 
 def _modal(me, event):

@@ -9,31 +9,18 @@ factors. Esc while they are made cancels the bake; a bug there leaves the bake w
 
 import json
 import threading
-import time
 
 import bpy
 import numpy as np
 import pytest
 
 from conftest import PACKAGE
-from test_operator import _Event, _modal, _Operator, _snapshot, _start_modal
+from test_operator import _Event, _modal, _Operator, _snapshot, _start_modal, drive
 from test_relight import fixed_cubes  # noqa: F401 (a fixture)
 from test_relight import colours_and_lux, lamp_and_two_lights, no_solve, room
 
 relight = PACKAGE.radiosity_addon.relight
 job = PACKAGE.radiosity_addon.job
-BakeCancelled = PACKAGE.core.BakeCancelled
-
-
-def _drive(me=None, seconds=120.0):
-    """Tick the modal bake that _start_modal started until it ends: (result, reports)."""
-    me, t0, result = me or _Operator(), time.perf_counter(), None
-    while time.perf_counter() - t0 < seconds:
-        result = _modal(me, _Event("TIMER"))
-        if result != {"PASS_THROUGH"}:
-            break
-        time.sleep(0.02)
-    return result, me.reports
 
 
 @pytest.fixture
@@ -63,7 +50,7 @@ def test_the_panel_bake_makes_every_group_so_its_first_relight_solves_nothing(
         (threading.current_thread().name, len(changes), sorted(kw))) or many(result, changes,
                                                                              **kw))
     _start_modal()
-    result, reports = _drive()
+    result, reports = drive()
     assert result == {"FINISHED"}, reports
     # One relight_many of the lamp alone, the lights and the bulb alone, in the worker, which
     # Esc reaches (cancel) and the progress bar follows.
@@ -106,7 +93,7 @@ def test_escape_while_the_groups_are_made_cancels_the_bake_and_writes_nothing(pa
     assert inside.wait(120)                    # the worker makes the groups: the user presses Esc
     assert _modal(me, _Event("ESC", "PRESS")) == {"RUNNING_MODAL"}
     escaped.set()
-    result, reports = _drive(me)
+    result, reports = drive(me)
     assert result == {"CANCELLED"}, reports
     assert any("cancelled" in text for _, text in reports)
     assert _snapshot() == before and relight.kept(bpy.context.scene) is None
@@ -121,7 +108,7 @@ def test_a_bug_while_the_groups_are_made_leaves_the_bake_written_and_says_so(pac
         raise ZeroDivisionError("a bug")
     monkeypatch.setattr(relight, "prepared", bug)
     _start_modal()
-    result, reports = _drive()
+    result, reports = drive()
     assert result == {"FINISHED"}, reports
     report = json.loads(bpy.context.scene.radiosity.last_report)
     assert any("Light groups not made with the bake (ZeroDivisionError: a bug)" in w
