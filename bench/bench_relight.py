@@ -202,6 +202,7 @@ def run(name, patches=10000, exact_direct=None, panel=False):
         groups[lights[0]].strength = 0.5
         extra["group_light_first_s"] = round(time.perf_counter() - t0, 3)
     extra.update(_every_group(relight, entry))
+    extra.update(_moved(relight))
     return dict(scene=name, panel=panel, bake_s=round(bake, 2),
                 light_groups_in_bake_s=round(report["timings"].get("light_groups", 0.0), 3),
                 bake_core_s=round(report["timings"]["total"], 2),
@@ -212,6 +213,30 @@ def run(name, patches=10000, exact_direct=None, panel=False):
                     report["form_factor_bytes"] / 2 ** 20, 2),
                 kept_mb=round(relight.kept_bytes(entry) / 2 ** 20, 2),
                 group_seconds={k: round(v, 3) for k, v in entry.seconds.items()})
+
+
+def _moved(relight):
+    """A light moved (its light cast again), relit as the panel's Relight runs it: seconds of
+    the main thread's read and write (relight.begin, finish) around the worker's solve
+    (relight.compute, while the UI stays live), then of the next worker's groups
+    (relight.make_groups); {} without a light."""
+    light = next((o for o in bpy.context.scene.objects if o.type == "LIGHT"), None)
+    if light is None:
+        return {}
+    light.location.x += 0.1
+    t0 = time.perf_counter()
+    pending = relight.begin(bpy.context)
+    t1 = time.perf_counter()
+    relight.compute(pending)
+    t2 = time.perf_counter()
+    report = relight.finish(bpy.context, pending)
+    t3 = time.perf_counter()
+    entry = relight.kept(bpy.context.scene)
+    groups = relight.needs_groups(entry) and relight.make_groups(entry)   # the next worker
+    return dict(moved_begin_s=round(t1 - t0, 3), moved_compute_s=round(t2 - t1, 3),
+                moved_finish_s=round(t3 - t2, 3), moved_summed=_summed(),
+                moved_groups_s=round(time.perf_counter() - t3, 3) if groups else None,
+                moved_warnings=[w for w in report["warnings"] if w.startswith("relight")])
 
 
 def _summed():
@@ -253,18 +278,19 @@ def _every_group(relight, entry):
     """Seconds to make every group's own solution from none: one core.relight at a time (as
     before core.relight_many), then all in one core.relight_many (the add-on's way)."""
     import numpy as np
+    relight_solve = PACKAGE.radiosity_addon.relight_solve
     weights = {g: np.full(3, 0.5) for g in relight.group_names(entry)}
-    out, prefetch = {}, relight._prefetch
+    out, prefetch = {}, relight_solve._prefetch
     for label, together in (("one_by_one", False), ("together", True)):
         entry.basis, entry.own, entry.lit, entry.world = {}, {}, None, None
         if not together:
-            relight._prefetch = lambda entry, ks: None
+            relight_solve._prefetch = lambda entry, ks: None
         try:
             t0 = time.perf_counter()
-            relight._mixed(entry, weights)
+            relight_solve.mixed(entry, weights)
             out[f"groups_{label}_s"] = round(time.perf_counter() - t0, 3)
         finally:
-            relight._prefetch = prefetch
+            relight_solve._prefetch = prefetch
     return out
 
 

@@ -21,7 +21,6 @@ where Blender alone would print a traceback and exit 0.
 import argparse
 import contextlib
 import csv
-import errno
 import importlib
 import importlib.util
 import json

@@ -235,37 +235,27 @@ def bake_now(context, options, progress=None, cancel=None):
     return apply(context, bake_input, result)
 
 
-class BakeJob:
-    """The core bake of a prepared input, in a worker thread.
+class Worker:
+    """Work in a thread with progress and a cancel flag, driven by a modal operator's timer
+    (the bake's :class:`BakeJob`, Relight's ``relight_ops.RelightJob``).
 
     Attributes
     ----------
     fraction : float
         Progress in [0, 1], updated by the worker.
     message : str
-    result : core.BakeResult or None
     error : BaseException or None
         What stopped the worker (``core.BakeCancelled`` after :meth:`cancel`).
-    units : list or None
-        ``relight.units_of``: with two groups or more, every group's own solution is made after
-        the core bake (:data:`GROUPS_SHARE` of the progress bar; Esc cancels the bake there too).
-    ready : relight.Kept or None
-        What ``relight.prepared`` made, for :func:`apply` to keep.
-    warnings : list of str
-        What the worker could not do, for the report.
     """
 
-    def __init__(self, bake_input, units=None):
-        self.bake_input = bake_input
+    name = "radiosity-worker"
+
+    def __init__(self):
         self.fraction = 0.0
         self.message = "Starting"
-        self.result = None
         self.error = None
-        self.units = units
-        self.ready = None
-        self.warnings = []
         self._cancel = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="radiosity-bake", daemon=True)
+        self._thread = threading.Thread(target=self._run, name=self.name, daemon=True)
 
     def start(self):
         self._thread.start()
@@ -289,15 +279,47 @@ class BakeJob:
         self.fraction, self.message = float(fraction), str(message)
 
     def _run(self):
-        groups = self.units is not None and len(self.units) > 1
-        share = 1.0 - GROUPS_SHARE if groups else 1.0
         try:
-            self.result = compute(self.bake_input, lambda f, m: self._progress(share * f, m),
-                                  self._cancel.is_set)
-            if groups:
-                self._groups(share)
+            self._work()
         except BaseException as exc:  # handed to the main thread, never lost in the thread
             self.error = exc
+
+    def _work(self):
+        raise NotImplementedError
+
+
+class BakeJob(Worker):
+    """The core bake of a prepared input, in a worker thread (:class:`Worker`).
+
+    Attributes
+    ----------
+    result : core.BakeResult or None
+    units : list or None
+        ``relight.units_of``: with two groups or more, every group's own solution is made after
+        the core bake (:data:`GROUPS_SHARE` of the progress bar; Esc cancels the bake there too).
+    ready : relight.Kept or None
+        What ``relight.prepared`` made, for :func:`apply` to keep.
+    warnings : list of str
+        What the worker could not do, for the report.
+    """
+
+    name = "radiosity-bake"
+
+    def __init__(self, bake_input, units=None):
+        super().__init__()
+        self.bake_input = bake_input
+        self.result = None
+        self.units = units
+        self.ready = None
+        self.warnings = []
+
+    def _work(self):
+        groups = self.units is not None and len(self.units) > 1
+        share = 1.0 - GROUPS_SHARE if groups else 1.0
+        self.result = compute(self.bake_input, lambda f, m: self._progress(share * f, m),
+                              self._cancel.is_set)
+        if groups:
+            self._groups(share)
 
     def _groups(self, share):
         """Every light group's own solution (relight.prepared), after the core bake."""

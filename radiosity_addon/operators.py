@@ -1,4 +1,7 @@
-"""Operators: bake (modal with a worker thread in the UI, synchronous without one) and clear."""
+"""Operators: bake (modal with a worker thread in the UI, synchronous without one) and clear.
+
+:class:`ModalJob` drives one worker at a time (the bake's, or Relight's in relight_ops): the
+bake and Relight are not offered while either runs, and Esc cancels it."""
 
 import traceback
 
@@ -28,14 +31,14 @@ def panel_job(context, bake_input):
 
 
 class _Running:
-    """The one running modal bake, kept outside the operator instance.
+    """The one running modal job (a bake or a Relight), kept outside the operator instance.
 
     Blender frees an operator's StructRNA when the modal ends, the window closes or the add-on is
     unregistered; touching the instance afterwards raises ReferenceError. Plain module state can
     always be read, so unregister can cancel a bake the operator no longer owns.
     """
 
-    job = None    # BakeJob
+    job = None    # job.Worker: BakeJob or RelightJob
     timer = None  # bpy.types.Timer
 
     @classmethod
@@ -43,7 +46,86 @@ class _Running:
         cls.job = cls.timer = None
 
 
-class RADIOSITY_OT_bake(bpy.types.Operator):
+class ModalJob:
+    """A modal operator that drives a :class:`job.Worker` (mixed into the bake's and Relight's
+    operators): its timer, the progress bar and status, Esc. A subclass starts its worker with
+    :meth:`_start` and writes its result in ``_finish_job(context, job)`` (main thread)."""
+
+    @staticmethod
+    def running():
+        return _Running.job is not None
+
+    def _start(self, context, worker):
+        self._continue(context, worker)
+        context.window_manager.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def _continue(self, context, worker):
+        """Drive ``worker`` (started here) from this modal operator: its timer, the progress
+        bar and status (``_finish_job`` may hand the run on to a next worker with it)."""
+        wm = context.window_manager
+        _Running.job = worker.start()
+        _Running.timer = wm.event_timer_add(TIMER_INTERVAL, window=context.window)
+        wm.radiosity_progress = 0.0
+        wm.radiosity_status = "Starting"
+        wm.progress_begin(0.0, 1.0)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        job = _Running.job
+        if job is None:  # unregistered or finished elsewhere: nothing left to drive
+            return {"CANCELLED"}
+        try:
+            return self._step(context, event, job)
+        except Exception as exc:  # a bug: never leave the panel without its button
+            traceback.print_exc()
+            job.cancel()
+            _end_display(context)
+            _Running.clear()
+            self.report({"ERROR"}, f"{self.bl_label} failed ({type(exc).__name__}): {exc}")
+            return {"CANCELLED"}
+
+    def _step(self, context, event, job):
+        if event.type == "ESC" and event.value == "PRESS":
+            job.cancel()
+            context.window_manager.radiosity_status = "Cancelling"
+            return {"RUNNING_MODAL"}
+        # (bpy.types.Event has no 'timer' in 4.2 to 5.0: any TIMER tick refreshes; only ours
+        # fires every TIMER_INTERVAL, and an extra refresh costs nothing.)
+        if event.type == "TIMER":
+            wm = context.window_manager
+            if job.done():
+                return self._finish(context)
+            wm.progress_update(job.fraction)
+            wm.radiosity_progress = 100.0 * job.fraction
+            wm.radiosity_status = "Cancelling" if job.cancelled else job.message
+            if context.workspace is not None:
+                context.workspace.status_text_set(
+                    f"Radiosity: {100 * job.fraction:.0f} % {job.message}  (Esc to cancel)")
+            for area in context.screen.areas if context.screen else ():
+                if area.type == "VIEW_3D":
+                    area.tag_redraw()
+        return {"PASS_THROUGH"}
+
+    def cancel(self, context):
+        # Blender calls this when the window closes mid-run: stop the worker, write nothing.
+        if _Running.job is not None:
+            _Running.job.cancel()
+            _Running.job.join(5.0)
+        _end_display(context)
+        _Running.clear()
+
+    def _finish(self, context):
+        """The one exit of a modal run: timer, progress and status always cleaned up."""
+        _end_display(context)
+        job = _Running.job
+        _Running.clear()
+        if job is None:
+            return {"CANCELLED"}
+        return self._finish_job(context, job)
+
+
+class RADIOSITY_OT_bake(ModalJob, bpy.types.Operator):
     """Bake diffuse interreflection into the 'Radiosity' colour attribute of the scene's meshes"""
 
     bl_idname = "radiosity.bake"
@@ -52,11 +134,7 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return context.scene is not None and not RADIOSITY_OT_bake.running()
-
-    @staticmethod
-    def running():
-        return _Running.job is not None
+        return context.scene is not None and not ModalJob.running()
 
     def _report_result(self, report):
         for warning in report.get("warnings", []):
@@ -84,66 +162,9 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
         except BakeError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
-        wm = context.window_manager
-        _Running.job = panel_job(context, bake_input).start()
-        _Running.timer = wm.event_timer_add(TIMER_INTERVAL, window=context.window)
-        wm.radiosity_progress = 0.0
-        wm.radiosity_status = "Starting"
-        wm.progress_begin(0.0, 1.0)
-        wm.modal_handler_add(self)
-        return {"RUNNING_MODAL"}
+        return self._start(context, panel_job(context, bake_input))
 
-    def modal(self, context, event):
-        job = _Running.job
-        if job is None:  # unregistered or finished elsewhere: nothing left to drive
-            return {"CANCELLED"}
-        try:
-            return self._step(context, event, job)
-        except Exception as exc:  # a bug: never leave the panel without its button
-            traceback.print_exc()
-            job.cancel()
-            _end_display(context)
-            _Running.clear()
-            self.report({"ERROR"}, f"Radiosity bake failed ({type(exc).__name__}): {exc}")
-            return {"CANCELLED"}
-
-    def _step(self, context, event, job):
-        if event.type == "ESC" and event.value == "PRESS":
-            job.cancel()
-            context.window_manager.radiosity_status = "Cancelling"
-            return {"RUNNING_MODAL"}
-        # (bpy.types.Event has no 'timer' in 4.2 to 5.0: any TIMER tick refreshes; only ours
-        # fires every TIMER_INTERVAL, and an extra refresh costs nothing.)
-        if event.type == "TIMER":
-            wm = context.window_manager
-            if job.done():
-                return self._finish(context)
-            wm.progress_update(job.fraction)
-            wm.radiosity_progress = 100.0 * job.fraction
-            wm.radiosity_status = "Cancelling" if job.cancelled else job.message
-            if context.workspace is not None:
-                context.workspace.status_text_set(
-                    f"Radiosity: {100 * job.fraction:.0f} % {job.message}  (Esc to cancel)")
-            for area in context.screen.areas if context.screen else ():
-                if area.type == "VIEW_3D":
-                    area.tag_redraw()
-        return {"PASS_THROUGH"}
-
-    def cancel(self, context):
-        # Blender calls this when the window closes mid-bake: stop the worker, write nothing.
-        if _Running.job is not None:
-            _Running.job.cancel()
-            _Running.job.join(5.0)
-        _end_display(context)
-        _Running.clear()
-
-    def _finish(self, context):
-        """The one exit of a modal bake: timer, progress and status always cleaned up."""
-        _end_display(context)
-        job = _Running.job
-        _Running.clear()
-        if job is None:
-            return {"CANCELLED"}
+    def _finish_job(self, context, job):
         if isinstance(job.error, BakeCancelled) or (job.cancelled and job.result is None):
             self.report({"INFO"}, "Radiosity bake cancelled; the scene is unchanged")
             return {"CANCELLED"}
@@ -203,7 +224,7 @@ def register():
 
 
 def unregister():
-    # A bake still running (quit or disable mid-bake): stop the worker; the modal handler ends
+    # A bake or Relight still running (quit or disable mid-run): stop the worker; the modal handler ends
     # itself on its next event. Nothing is written.
     job = _Running.job
     if job is not None:

@@ -21,14 +21,21 @@ again.
   once that solution is kept. A group is each emissive material (area lights are emissive
   polygons), each point, spot and sun light (named after its object) and the world ("World");
   Blender's light groups (``Object.lightgroup``, ``World.lightgroup``) merge what they hold.
-  The groups' own solutions are made every group's at once (:func:`_prefetch`: one
-  ``core.relight_many``, one matrix swept for all): by the panel's bake in its worker, after the
-  core bake (:func:`prepared`), so its first Relight or group change solves nothing; otherwise
-  when a group is first weighted. A material's emission alone, a light alone (the others at
-  power 0: its shadow rays read back), no light for the world. On the radiosity mesh too: the
-  mesh is kept. A Relight with groups weighted makes only theirs.
+  The groups' own solutions (:mod:`radiosity_addon.relight_solve`) are made every group's at
+  once (one ``core.relight_many``, one matrix swept for all): by the panel's bake in its
+  worker, after the core bake (:func:`prepared`), so its first Relight or group change solves
+  nothing; otherwise when a group is first weighted. A material's emission alone, a light
+  alone (the others at power 0: its shadow rays read back), no light for the world. On the
+  radiosity mesh too: the mesh is kept. A Relight with groups weighted makes only theirs.
 
-The colours are written by ``job.apply``, exactly as a bake writes them.
+A Relight runs in three steps, as a bake does: :func:`begin` (main thread: the scene read),
+:func:`compute` (any thread: the panel's Relight solves in a worker, with progress and Esc, on a
+copy of the kept bake, so the group sliders' sums on the kept one stay right while it runs) and
+:func:`finish` (main thread: the copy becomes the kept bake, the colours are written by
+``job.apply``, exactly as a bake writes them). :func:`relight` runs the three in turn. After
+the panel's Relight that solved is written, its run makes every group's own solution in a next
+worker (:func:`make_groups`), so a group change after it is a weighted sum, as after the
+panel's bake.
 """
 
 import json
@@ -40,9 +47,7 @@ from dataclasses import dataclass, field, replace
 import bpy
 import numpy as np
 
-from .. import core
-from ..core.errors import BakeCancelled, RadiosityError
-from . import job, surfaces
+from . import job, relight_solve as solving, surfaces
 from .light_units import Solution, units as light_units
 from .same import BAKE_AGAIN, RelightError, check_baked, read, unit_factors
 
@@ -131,16 +136,33 @@ def prepared(bake_input, result, units, progress=None, cancel=None):
     entry = _entry(bake_input, result, units)
     if len(units) < 2 or kept_bytes(entry) > kept_budget(bake_input):
         return None
-    t0 = time.perf_counter()
-    entry.calls = dict(progress=progress, cancel=cancel)
-    try:
-        _solutions(entry, range(len(units)))
-    except RelightError:
+    if not make_groups(entry, progress, cancel, "prepared in the bake"):
         return None
+    return entry
+
+
+def needs_groups(entry):
+    """Whether a kept bake has two groups or more and not every group's own solution."""
+    return entry is not None and len(entry.units) > 1 \
+        and any(k not in entry.basis for k in range(len(entry.units)))
+
+
+def make_groups(entry, progress=None, cancel=None, label="groups made"):
+    """Make every light group's own solution of a kept bake (any thread: the panel's bake
+    before writing, its Relight that solved after writing, each in its worker), so the next
+    group change is a weighted sum; False when a group alone re-meshes (nothing made: the first
+    change solves, as before). Its seconds go to ``entry.seconds[label]``."""
+    t0 = time.perf_counter()
+    entry.calls = {k: f for k, f in dict(progress=progress, cancel=cancel).items()
+                   if f is not None}
+    try:
+        solving.solutions(entry, range(len(entry.units)))
+    except RelightError:
+        return False
     finally:
         entry.calls = {}
-    entry.seconds["prepared in the bake"] = time.perf_counter() - t0
-    return entry
+    entry.seconds[label] = time.perf_counter() - t0
+    return True
 
 
 def kept_budget(bake_input):
@@ -217,245 +239,9 @@ def _ops():
     return relight_ops
 
 
-def _weights(scene, entry):
+def group_weights(scene, entry):
+    """{group name: (3,) strength x tint} of the scene's group list for a kept bake."""
     return _ops().weights(scene, group_names(entry))
-
-
-# ----------------------------------------------------------------------------- solving
-
-
-def _relit(entry, emission, back_emission, lights=None):
-    """core.relight of the kept bake with this emission (and these lights: cast again), or
-    the one :func:`_prefetch` made."""
-    if entry.planning is not None:                  # :func:`_prefetch` plans: a stand-in
-        entry.planning.setdefault(_key(emission, back_emission, lights),
-                                  (emission, back_emission, lights))
-        return entry.template
-    made = entry.made.get(_key(emission, back_emission, lights))
-    if made is not None:
-        return made
-    try:
-        return core.relight(entry.result, **_change(emission, back_emission, lights),
-                            **entry.calls)
-    except BakeCancelled:
-        raise
-    except (RadiosityError, ValueError) as exc:
-        raise RelightError(f"Relight failed: {exc}") from exc
-
-
-def _change(emission, back_emission, lights):
-    kw = dict(emission=emission)
-    if back_emission is not None:
-        kw["back_emission"] = back_emission
-    if lights is not None:
-        kw["lights"] = lights
-    return kw
-
-
-def _key(emission, back_emission, lights):
-    """What tells one relight of the kept bake from another: the emission and the lights'
-    power (their places are the kept ones: :func:`_alone`)."""
-    parts = [emission, back_emission] + ([] if lights is None else
-                                         [lights.intensity, lights.sun_irradiance])
-    return tuple(None if a is None else np.asarray(a, np.float64).tobytes() for a in parts)
-
-
-def _prefetch(entry, ks):
-    """Make every relight that the own solutions of units ``ks`` need in one
-    ``core.relight_many``: one matrix assembled and swept for all (core.groups), about twice
-    as fast as one by one. The plan is :func:`_unit` itself, run with the kept bake standing in
-    for every relight (:func:`_relit` records what is asked), then undone; :func:`_relit` hands
-    the relights out when :func:`_unit` runs for real."""
-    todo, saved = {}, {name: getattr(entry, name) for name in ("basis", "own", "lit", "world",
-                                                               "seconds")}
-    entry.basis, entry.own, entry.seconds, entry.planning = dict(entry.basis), \
-        dict(entry.own), {}, todo
-    try:
-        for k in ks:
-            _unit(entry, k)
-    finally:
-        entry.planning = None
-        vars(entry).update(saved)
-    _make(entry, todo)
-
-
-def _emission_of(entry, unit):
-    """(emission, back emission or None) of a unit of materials alone; (None, None) when it
-    is dark."""
-    only, back = _dark(entry)
-    only[unit.materials] = entry.emission[unit.materials]
-    if back is not None:
-        back[unit.materials] = entry.back_emission[unit.materials]
-    if only.any() or (back is not None and back.any()):
-        return only, back
-    return None, None
-
-
-def _world_change(entry):
-    """The relight :func:`_world` asks for, or None (no world, or made)."""
-    if entry.bake_input.scene.world is None or entry.world is not None:
-        return None
-    return (*_dark(entry), _alone(entry.lights_ref, ()))
-
-
-def _make(entry, todo):
-    """The relights ``todo`` ({key: (emission, back emission, lights)}) in one
-    ``core.relight_many``, for :func:`_relit` to hand out."""
-    if len(todo) < 2:
-        return                   # one relight: core.relight, as it comes
-    t0 = time.perf_counter()
-    try:
-        made = core.relight_many(entry.result, [_change(*c) for c in todo.values()],
-                                 **entry.calls)
-    except BakeCancelled:
-        raise
-    except (RadiosityError, ValueError) as exc:
-        raise RelightError(f"Relight failed: {exc}") from exc
-    entry.made = dict(zip(todo, made))
-    entry.seconds[f"{len(made)} relights together"] = time.perf_counter() - t0
-
-
-def _lit(entry):
-    """The lights' and world's solution at ``lights_ref``'s power, no emission (computed once:
-    one solve, their direct light is kept in the bake)."""
-    if entry.lit is None:
-        t0 = time.perf_counter()
-        entry.lit = Solution.of(_relit(entry, *_dark(entry)), _surfaces(entry))
-        entry.seconds["lights_solution"] = time.perf_counter() - t0
-    return entry.lit
-
-
-def _dark(entry):
-    """(emission, back emission or None) of no emissive material."""
-    M = entry.emission.shape[0]
-    return np.zeros((M, 3)), None if entry.back_emission is None else np.zeros((M, 3))
-
-
-def _alone(lights, index):
-    """Core Lights ``lights`` with every light but ``index`` at power 0 (they then cast no
-    shadow ray: core.lights.CULL); None for no lights."""
-    if lights is None:
-        return None
-    on = np.isin(np.arange(len(lights)), index)[:, None]
-    n = lights.n_points
-    return replace(lights, intensity=np.where(on[:n], lights.intensity, 0.0),
-                   sun_irradiance=np.where(on[n:], lights.sun_irradiance, 0.0))
-
-
-def _cast(entry, index):
-    """The solution of the kept lights ``index`` alone with the world (if any), no emission
-    (``core.relight(lights=)``: the bake's shadow rays read back, one solve)."""
-    relit = _relit(entry, *_dark(entry), lights=_alone(entry.lights_ref, index))
-    _same_mesh(entry, relit)
-    return Solution.of(relit, _surfaces(entry))
-
-
-def _world(entry):
-    """The world's own solution (a cast with no light; computed once), or None without one."""
-    if entry.world is None and entry.bake_input.scene.world is not None:
-        t0 = time.perf_counter()
-        entry.world = _cast(entry, ())
-        entry.seconds["world_solution"] = time.perf_counter() - t0
-    return entry.world
-
-
-def _lights_only(entry):
-    """The point, spot and sun lights' solution at ``lights_ref``'s power, without the world."""
-    world = _world(entry)
-    return _lit(entry) if world is None else _lit(entry).combine(world, -1.0)
-
-
-def _surfaces(entry):
-    return entry.bake_input.extraction.surfaces
-
-
-def _unit(entry, k):
-    """Unit k's own Solution at the current emission and lights factor, or None (dark): made
-    when its group is first weighted (a solve for emissive materials, a cast for lights), then
-    kept until the next Relight."""
-    if k in entry.basis:
-        return entry.basis[k]
-    t0 = time.perf_counter()
-    unit, sol = entry.units[k], None
-    if len(entry.units) == 1:
-        sol = entry.full                                    # the one unit is all the light
-    elif unit.materials is not None:
-        only, back = _emission_of(entry, unit)
-        if only is not None:
-            relit = _relit(entry, only, back)
-            _same_mesh(entry, relit)
-            sol = Solution.of(relit, _surfaces(entry))
-            if any(u.materials is None for u in entry.units):
-                sol = sol.combine(_lit(entry), -1.0)        # the lights shine in that solve
-    elif [j for j, u in enumerate(entry.units) if u.materials is None] == [k] \
-            and np.array_equal(entry.lights_factor, np.ones(3)):
-        sol = _lit(entry)                                   # every light and the world
-    else:
-        if unit.lights:
-            sol = _own(entry, k).scaled(entry.lights_factor)
-        if unit.world:
-            sol = _world(entry) if sol is None else sol.combine(_world(entry))
-    entry.basis[k] = sol
-    entry.seconds[f"group {unit.group}"] = time.perf_counter() - t0
-    return sol
-
-
-def _own(entry, k):
-    """The lights of unit k alone, without the world, at ``lights_ref``'s power (kept until
-    they are cast again): cast alone, or, once every other unit of lights has its own, the
-    rest of the lights' solution (no cast; it then also carries the difference the core's light
-    culling makes, core.lights.CULL: a light culled at a point casts one ray there, not its
-    penumbra's rounds)."""
-    if k not in entry.own:
-        others = [j for j, u in enumerate(entry.units) if u.materials is None and u.lights
-                  and j != k]
-        if all(j in entry.own for j in others):
-            sol = _lights_only(entry)
-            for j in others:
-                sol = sol.combine(entry.own[j], -1.0)
-        else:
-            sol, world = _cast(entry, entry.units[k].lights), _world(entry)
-            sol = sol if world is None else sol.combine(world, -1.0)
-        entry.own[k] = sol
-    return entry.own[k]
-
-
-def _solutions(entry, order):
-    """Make the own solutions of units ``order`` (:func:`_unit`), at once (:func:`_prefetch`)."""
-    try:
-        _prefetch(entry, order)
-        for k in order:              # in the order _prefetch planned (a light's own solution
-            _unit(entry, k)          # may be the rest of the lights': core.lights.CULL)
-    finally:
-        entry.made = {}
-
-
-def _same_mesh(entry, relit):
-    """Group solutions add up only on one radiosity mesh."""
-    a, b = entry.template.output, relit.output
-    if a is None and b is None:
-        return
-    if a is None or b is None or a.corner_verts.shape != b.corner_verts.shape \
-            or not np.array_equal(a.vertices, b.vertices):
-        raise RelightError("Light groups: a group alone re-meshed the radiosity mesh (a new "
-                           "emitter, or exact emitters); set its strength back and bake again")
-
-
-def _mixed(entry, weights, every=False):
-    """The written Solution: the light with every group at 1, plus each weighted group's own
-    solution times (its weight - 1). ``every``: when a group's solution is missing, make every
-    group's at once (:func:`_prefetch`), so the next groups' changes solve nothing."""
-    w = {k: weights[u.group] * entry.scale.get(k, 1.0) for k, u in enumerate(entry.units)}
-    wanted = [k for k in w if not np.array_equal(w[k], np.ones(3))]
-    order = wanted
-    if every and any(k not in entry.basis for k in wanted):
-        order = range(len(entry.units))
-    _solutions(entry, order)
-    total = entry.full
-    for k in wanted:
-        sol = entry.basis[k]
-        total = total if sol is None else total.combine(sol, w[k] - 1.0)
-    return total
 
 
 def _write(context, entry, solution, seconds, summed=False):
@@ -463,7 +249,7 @@ def _write(context, entry, solution, seconds, summed=False):
     groups' weighted sum, no solve of its own: its time, not the kept bake's stages)."""
     result = solution.as_result(entry.template)
     outdoor = entry.template.report.get("sky", {}).get("outdoor_lux")
-    for surf, arriving in zip(_surfaces(entry), solution.surfaces):
+    for surf, arriving in zip(solving.surfaces_of(entry), solution.surfaces):
         surfaces.fill(surf, arriving, outdoor)
     report = job.apply(context, entry.bake_input, result, keep=False)
     if summed:
@@ -475,14 +261,49 @@ def _write(context, entry, solution, seconds, summed=False):
     return report
 
 
+@dataclass
+class Pending:
+    """A Relight begun (:func:`begin`): the scene's light as read, and what :func:`compute` makes
+    of it on ``work``, a copy of the kept bake ``entry``."""
+
+    entry: Kept
+    work: Kept
+    light: tuple             # (emission, back emission, core Lights, lights factor or None)
+    scale: dict              # same.unit_factors: each group only scaled, or None
+    units: list              # the scene's units, when the lights are cast again (else None)
+    weights: dict            # group name -> (3,): the sliders at begin
+    t0: float
+    solution: Solution = None
+    summed: bool = False
+
+    @property
+    def instant(self):
+        """A weighted sum of solutions already made: no solve, no need for a worker."""
+        return self.scale is not None and all(k in self.entry.basis
+                                              for k in range(len(self.entry.units)))
+
+
+def _copy(entry):
+    """A Kept to compute on: its own dicts, the arrays shared (nothing changes them in place)."""
+    return replace(entry, basis=dict(entry.basis), own=dict(entry.own), made={}, calls={},
+                   seconds=dict(entry.seconds), scale=dict(entry.scale))
+
+
 def relight(context):
-    """Relight the scene's kept bake with the scene's current light (main thread).
+    """Relight the scene's kept bake with the scene's current light (main thread):
+    :func:`begin`, :func:`compute`, :func:`finish`.
 
     When each group's light was only scaled (strength, power, colour: ``same.unit_factors``),
     this is the groups' weighted sum with no solve (every group's solution is made at once
     when one is missing, as :func:`mix` makes them).
     Returns the report dict; raises RelightError (nothing written) when there is no kept bake or
     the scene changed otherwise."""
+    return finish(context, compute(begin(context)))
+
+
+def begin(context):
+    """Read the scene's light for a Relight of its kept bake (main thread); a :class:`Pending`.
+    Raises RelightError when there is no kept bake or the scene changed otherwise."""
     scene = context.scene
     entry = kept(scene)
     if entry is None:
@@ -499,49 +320,85 @@ def relight(context):
     t0 = time.perf_counter()
     emission, back, lights, factor = read(context, entry)
     if lights is None:             # every light deleted: the kept ones at no power (factor 0)
-        lights = _alone(entry.lights_ref, ())
+        lights = solving.alone(entry.lights_ref, ())
     if factor is not None and not np.array_equal(factor, np.ones(3)) \
             and entry.bake_input.scene.world is not None \
             and entry.bake_input.settings.output_mode == "mesh":
         factor = None              # the world cannot leave the lights' solution on this mesh
-    before = dict(vars(entry))     # ``lights``: the scene's, as _reference(entry) holds them
+    # ``lights``: the scene's, as _reference(entry) holds them
     scale = unit_factors(entry.units, (entry.emission, entry.back_emission, _reference(entry)),
                          (emission, back, lights))
-    if scale is not None:
-        try:
-            entry.scale = scale
-            return _write(context, entry, _mixed(entry, _weights(scene, entry), True),
-                          time.perf_counter() - t0, summed=True)
-        except RelightError:       # a group alone re-meshed: solve the scene's light below
-            vars(entry).update(before)
+    units = light_units(entry.bake_input, scene, lights) if factor is None else None
+    names = [u.group for u in entry.units + (units or [])]
+    return Pending(entry, _copy(entry), (emission, back, lights, factor), scale, units,
+                   _ops().weights(scene, names), t0)
+
+
+def compute(pending, progress=None, cancel=None):
+    """Solve a begun Relight on its copy of the kept bake (any thread; ``progress``,
+    ``cancel``: as core.relight's, core.BakeCancelled when cancelled); returns ``pending``."""
+    emission, back, lights, factor = pending.light
+    calls = {k: f for k, f in dict(progress=progress, cancel=cancel).items() if f is not None}
+    work = pending.work
+    work.calls = calls
     try:
+        if pending.scale is not None:
+            try:
+                work.scale = pending.scale
+                pending.solution = solving.mixed(work, pending.weights, True)
+                pending.summed = True
+                return pending
+            except RelightError:   # a group alone re-meshed: solve the scene's light below
+                pending.work = work = _copy(pending.entry)
+                work.calls = calls
         if factor is None:         # lights moved, added or changed apart: cast them again
-            relit = _relit(entry, emission, back, lights)
-            entry.result = entry.template = relit
-            entry.lights_ref, entry.lit, entry.world, factor = lights, None, None, np.ones(3)
-            entry.own, solution = {}, Solution.of(relit, _surfaces(entry))
-            entry.units = light_units(entry.bake_input, scene, lights)
+            relit = solving.relit_with(work, emission, back, lights)
+            work.result = work.template = relit
+            work.lights_ref, work.lit, work.world, factor = lights, None, None, np.ones(3)
+            work.own, solution = {}, Solution.of(relit, solving.surfaces_of(work))
+            work.units = pending.units
         else:                      # one solve: the scene's light as it is now
             scaled = not np.array_equal(factor, np.ones(3))
             if scaled:             # and the lights' own solution, solved with it
-                todo = [(emission, back, None), (*_dark(entry), None) if entry.lit is None
-                        else None, _world_change(entry)]
-                _make(entry, {_key(*c): c for c in todo if c is not None})
-            relit = _relit(entry, emission, back)
-            _same_mesh_or_new(entry, relit, scaled)
-            solution = Solution.of(relit, _surfaces(entry))
+                todo = [(emission, back, None), (*solving.dark(work), None) if work.lit is None
+                        else None, solving.world_change(work)]
+                solving.make_together(work, {solving.key_of(*c): c for c in todo
+                                             if c is not None})
+            relit = solving.relit_with(work, emission, back)
+            _same_mesh_or_new(work, relit, scaled)
+            solution = Solution.of(relit, solving.surfaces_of(work))
             if scaled:
-                solution = solution.combine(_lights_only(entry), factor - 1.0)
-            entry.template = relit
-        entry.emission, entry.back_emission, entry.lights_factor = emission, back, factor
-        entry.full, entry.basis, entry.scale = solution, {}, {}
-        solution = _mixed(entry, _weights(scene, entry))  # a group new since a cast is at 1
-        report = _write(context, entry, solution, time.perf_counter() - t0)
-    except BaseException:          # nothing was written: the kept bake stays as it was
-        vars(entry).update(before)
-        raise
-    if group_names(entry) != [g.name for g in scene.radiosity_groups]:
-        _ops().set_groups(scene, group_names(entry), keep_values=True)
+                solution = solution.combine(solving.lights_only(work), factor - 1.0)
+            work.template = relit
+        work.emission, work.back_emission, work.lights_factor = emission, back, factor
+        work.full, work.basis, work.scale = solution, {}, {}
+        # a group new since a cast is at 1
+        pending.solution = solving.mixed(work, pending.weights)
+        return pending
+    finally:
+        work.calls = {}
+
+
+def finish(context, pending):
+    """Write a computed Relight and keep its bake (main thread); returns the report dict.
+    Group sliders moved while it ran are mixed in when that solves nothing (otherwise the
+    panel's run mixes them once its groups are made; ``pending.weights``: those written).
+    Raises RelightError (nothing written) when the kept bake went meanwhile (Clear Bake,
+    Forget, a new bake)."""
+    scene = context.scene
+    if kept(scene) is not pending.entry:
+        raise RelightError(f"Relight: the kept bake was cleared while it ran; {BAKE_AGAIN}")
+    work, solution = pending.work, pending.solution
+    now = group_weights(scene, work)
+    if any(not np.array_equal(w, pending.weights[g]) for g, w in now.items()) \
+            and solving.summable(work, now):
+        solution = solving.mixed(work, now)     # a slider moved while it ran: no solve
+        pending.weights = dict(pending.weights, **now)
+    report = _write(context, work, solution, time.perf_counter() - pending.t0,
+                    summed=pending.summed)
+    _KEPT[scene.session_uid] = work
+    if group_names(work) != [g.name for g in scene.radiosity_groups]:
+        _ops().set_groups(scene, group_names(work), keep_values=True)
     return report
 
 
@@ -559,7 +416,7 @@ def _same_mesh_or_new(entry, relit, scaled):
     if relit.output is None:
         return
     try:
-        _same_mesh(entry, relit)
+        solving.same_mesh(entry, relit)
     except RelightError:
         if scaled:
             raise RelightError("Relight: the emitters were meshed again (exact emitters), so "
@@ -575,5 +432,5 @@ def mix(context, every=True):
     if entry is None:
         raise RelightError(f"Light groups: no bake is kept in memory; {BAKE_AGAIN}")
     t0 = time.perf_counter()
-    solution = _mixed(entry, _weights(context.scene, entry), every=every)
+    solution = solving.mixed(entry, group_weights(context.scene, entry), every=every)
     return _write(context, entry, solution, time.perf_counter() - t0, summed=True)

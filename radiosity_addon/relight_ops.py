@@ -4,7 +4,8 @@ The work is in :mod:`radiosity_addon.relight`; this module is what the user touc
 (``Scene.radiosity_groups``: each emissive material, point, spot and sun light, the world, or a
 Blender light group) has a strength and a tint; changing either writes the groups' weighted sum
 at once (no solve once the groups' solutions are kept). :func:`set_groups` fills the list,
-:func:`weights` reads it.
+:func:`weights` reads it. The Relight button's solve runs in a worker (:class:`RelightJob`, with
+progress and Esc, as the bake's); a Relight that is a weighted sum is written at once.
 """
 
 import traceback
@@ -13,17 +14,18 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
+from ..core.errors import BakeCancelled
 from . import job, relight
+from .operators import ModalJob
 
 #: The last light-group error per scene (an update callback cannot report): the panel shows it.
 _ERRORS = {}
 
 
 def _group_changed(self, context):
-    from .operators import RADIOSITY_OT_bake
-
-    if relight.is_quiet() or context is None or context.scene is None \
-            or RADIOSITY_OT_bake.running():     # the bake's result will replace the groups
+    # While a bake or Relight runs, its result replaces the groups' (a Relight mixes the
+    # sliders as they are when it ends).
+    if relight.is_quiet() or context is None or context.scene is None or ModalJob.running():
         return
     scene = context.scene
     _ERRORS.pop(scene.session_uid, None)
@@ -82,7 +84,38 @@ class RADIOSITY_PG_group(bpy.types.PropertyGroup):
         update=_group_changed)
 
 
-class RADIOSITY_OT_relight(bpy.types.Operator):
+class RelightJob(job.Worker):
+    """A begun Relight's solve (``relight.compute``) in a worker thread."""
+
+    name = "radiosity-relight"
+
+    def __init__(self, pending):
+        super().__init__()
+        self.pending = pending
+
+    def _work(self):
+        relight.compute(self.pending, lambda f, m: self._progress(f, f"Relight: {m}"),
+                        self._cancel.is_set)
+
+
+class GroupsJob(job.Worker):
+    """Every light group's own solution of the kept bake (``relight.make_groups``) in a worker
+    thread, after a Relight that solved was written: the next group change is a weighted sum.
+    ``weights``: the group sliders the Relight wrote with (they write nothing while it runs)."""
+
+    name = "radiosity-groups"
+
+    def __init__(self, entry, weights):
+        super().__init__()
+        self.entry, self.weights, self.made = entry, weights, False
+
+    def _work(self):
+        self.made = relight.make_groups(
+            self.entry, lambda f, m: self._progress(f, f"Light groups: {m}"),
+            self._cancel.is_set, "groups made after the relight")
+
+
+class RADIOSITY_OT_relight(ModalJob, bpy.types.Operator):
     """Solve again with the lights' and emissive materials' current strength and colour, on the
     last bake's form factors (geometry and materials must be unchanged)"""
 
@@ -92,16 +125,71 @@ class RADIOSITY_OT_relight(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        from .operators import RADIOSITY_OT_bake
-
-        return context.scene is not None and not RADIOSITY_OT_bake.running()
+        return context.scene is not None and not ModalJob.running()
 
     def execute(self, context):
-        window = context.window          # a Relight that solves blocks (seconds at 10k patches)
+        window = context.window          # a script's Relight that solves blocks
         if window is not None:
             window.cursor_modal_set("WAIT")
         try:
-            report = relight.relight(context)
+            return self._ended(context, lambda: relight.relight(context))
+        finally:
+            if window is not None:
+                window.cursor_modal_restore()
+
+    def invoke(self, context, event):
+        if bpy.app.background or context.window is None:
+            return self.execute(context)
+        begun = {}
+
+        def begin():          # a weighted sum is written at once; a solve goes to a worker
+            begun["pending"] = pending = relight.begin(context)
+            return relight.finish(context, relight.compute(pending)) if pending.instant \
+                else None
+
+        return self._ended(context, begin) or self._start(context, RelightJob(begun["pending"]))
+
+    def _finish_job(self, context, worker):
+        if isinstance(worker, GroupsJob):
+            return self._groups_made(context, worker)
+        if isinstance(worker.error, BakeCancelled) or worker.cancelled:
+            self.report({"INFO"}, "Relight cancelled; the colours are as they were")
+            return {"CANCELLED"}
+
+        def finish():
+            if worker.error is not None:
+                raise worker.error
+            return relight.finish(context, worker.pending)
+
+        ended = self._ended(context, finish)
+        entry = relight.kept(context.scene)
+        if ended != {"FINISHED"} or not relight.needs_groups(entry):
+            return ended
+        # Written (one undo step when the run ends): every group's own solution next, in a
+        # worker, so a group change after this Relight is a weighted sum (Esc stops only that).
+        return self._continue(context, GroupsJob(entry, worker.pending.weights))
+
+    def _groups_made(self, context, worker):
+        """The run's end after :class:`GroupsJob`: the Relight stays written whatever happened
+        there; group sliders moved meanwhile are mixed in now."""
+        if isinstance(worker.error, BakeCancelled) or worker.cancelled:
+            self.report({"INFO"}, "Light groups not made (cancelled); the first group change "
+                                  "makes them")
+        elif worker.error is not None:
+            traceback.print_exception(worker.error)
+            self.report({"WARNING"}, f"Light groups not made ({type(worker.error).__name__}: "
+                                     f"{worker.error}); the first group change makes them")
+        now = relight.group_weights(context.scene, worker.entry)
+        if relight.kept(context.scene) is worker.entry and any(
+                not np.array_equal(w, worker.weights[g]) for g, w in now.items()):
+            _group_changed(None, context)
+        return {"FINISHED"}
+
+    def _ended(self, context, run):
+        """Run ``run()`` (the report dict, or None: not ended) and report as the operator ends:
+        {'FINISHED'}, {'CANCELLED'} (nothing written), or None."""
+        try:
+            report = run()
         except job.BakeError as exc:           # RelightError, or writing failed
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
@@ -109,9 +197,8 @@ class RADIOSITY_OT_relight(bpy.types.Operator):
             traceback.print_exc()
             self.report({"ERROR"}, f"Relight failed ({type(exc).__name__}): {exc}")
             return {"CANCELLED"}
-        finally:
-            if window is not None:
-                window.cursor_modal_restore()
+        if report is None:
+            return None
         _ERRORS.pop(context.scene.session_uid, None)
         for warning in report.get("warnings", []):
             self.report({"WARNING"}, warning)

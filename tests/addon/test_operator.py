@@ -680,8 +680,14 @@ class _Event:
 class _Operator:
     """Stands in for the operator instance (the bpy module never runs a modal operator)."""
 
-    def __init__(self):
+    def __init__(self, cls=None):
         self.reports = []
+        self.cls = cls or PACKAGE.radiosity_addon.operators.RADIOSITY_OT_bake
+        self.bl_label = self.cls.bl_label
+        for name in ("_step", "_finish", "_finish_job", "_report_result", "_ended", "_start",
+                     "_continue", "_groups_made"):
+            if hasattr(self.cls, name):              # its helpers, bound to the stand-in
+                setattr(self, name, getattr(self.cls, name).__get__(self))
 
     def report(self, kind, text):
         self.reports.append((set(kind), text))
@@ -736,12 +742,12 @@ def test_unregister_mid_bake_stops_the_worker(package):
 
 
 def drive(me=None, seconds=120.0):
-    """Tick the modal bake that _start_modal started until it ends (or ``seconds`` pass):
-    (its last result, the reports of ``me``, the stand-in operator)."""
+    """Tick the modal job that _start_modal (or a Relight's invoke) started until it ends (or
+    ``seconds`` pass): (its last result, the reports of ``me``, the stand-in operator)."""
     me, t0, result = me or _Operator(), time.perf_counter(), None
     while time.perf_counter() - t0 < seconds:
         result = _modal(me, _Event("TIMER"))
-        if result != {"PASS_THROUGH"}:
+        if result not in ({"PASS_THROUGH"}, {"RUNNING_MODAL"}):   # (a next worker: on)
             break
         time.sleep(0.02)
     return result, me.reports
@@ -749,12 +755,7 @@ def drive(me=None, seconds=120.0):
 
 def _modal(me, event):
     """Call the operator's modal with a stand-in instance (its helpers bound to it)."""
-    ops = PACKAGE.radiosity_addon.operators
-    cls = ops.RADIOSITY_OT_bake
-    me._step = cls._step.__get__(me)
-    me._finish = cls._finish.__get__(me)
-    me._report_result = cls._report_result.__get__(me)
-    return cls.modal(me, bpy.context, event)
+    return me.cls.modal(me, bpy.context, event)
 
 
 def test_summary_lines_say_what_the_mesh_output_wrote():

@@ -254,8 +254,8 @@ def test_group_changes_after_the_first_are_a_weighted_sum_with_no_solve(package,
 
     def no_solve(*args, **kwargs):
         raise AssertionError("a light group change solved again")
-    monkeypatch.setattr(relight.core, "relight", no_solve)
-    monkeypatch.setattr(relight.core, "relight_many", no_solve)
+    monkeypatch.setattr(PACKAGE.core, "relight", no_solve)
+    monkeypatch.setattr(PACKAGE.core, "relight_many", no_solve)
     groups["lamp"].strength = 1.0
     assert_close(colours_and_lux(walls), baked)
     groups["lamp"].strength = 2.0
@@ -547,10 +547,10 @@ def test_a_group_change_makes_every_group_alone_once(package, monkeypatch):
     # nothing.
     objects, _ = two_lights()
     bake()
-    calls, one, many = [], relight.core.relight, relight.core.relight_many
-    monkeypatch.setattr(relight.core, "relight",
+    calls, one, many = [], PACKAGE.core.relight, PACKAGE.core.relight_many
+    monkeypatch.setattr(PACKAGE.core, "relight",
                         lambda result, **kw: calls.append(sorted(kw)) or one(result, **kw))
-    monkeypatch.setattr(relight.core, "relight_many",
+    monkeypatch.setattr(PACKAGE.core, "relight_many",
                         lambda result, changes: calls.append([sorted(c) for c in changes])
                         or many(result, changes))
     groups = bpy.context.scene.radiosity_groups
@@ -608,8 +608,8 @@ def test_relight_that_only_scales_groups_is_their_weighted_sum_with_no_solve(pac
     # at the points where it is dim, not where the sum is).
     monkeypatch.setattr(PACKAGE.core.lights, "CULL", cull)
     objects, lamp, (bulb, spot), baked = lamp_and_two_lights()
-    calls, one, many = [], relight.core.relight, relight.core.relight_many
-    monkeypatch.setattr(relight.core, "relight_many",
+    calls, one, many = [], PACKAGE.core.relight, PACKAGE.core.relight_many
+    monkeypatch.setattr(PACKAGE.core, "relight_many",
                         lambda result, changes: calls.append(len(changes)) or many(result,
                                                                                   changes))
     bulb.data.energy *= 2.0
@@ -617,8 +617,8 @@ def test_relight_that_only_scales_groups_is_their_weighted_sum_with_no_solve(pac
     assert calls == [3]          # the lamp alone, the lights, the bulb alone (no world here)
     assert json.loads(bpy.context.scene.radiosity.last_report)["relight"]["summed"]
 
-    monkeypatch.setattr(relight.core, "relight", no_solve)
-    monkeypatch.setattr(relight.core, "relight_many", no_solve)
+    monkeypatch.setattr(PACKAGE.core, "relight", no_solve)
+    monkeypatch.setattr(PACKAGE.core, "relight_many", no_solve)
     set_lamp(lamp, strength=6.0, colour=(1.0, 0.6, 0.3))
     spot.data.energy, spot.data.color = 30.0, (0.5, 0.7, 1.0)
     assert bpy.ops.radiosity.relight() == {"FINISHED"}
@@ -627,8 +627,8 @@ def test_relight_that_only_scales_groups_is_their_weighted_sum_with_no_solve(pac
     assert report["timings"]["total"] == pytest.approx(report["relight"]["seconds"], abs=1e-4)
     bpy.context.scene.radiosity_groups["Spot"].strength = 0.5       # the groups on top
     summed = [colours_and_lux(o) for o in objects]
-    monkeypatch.setattr(relight.core, "relight", one)
-    monkeypatch.setattr(relight.core, "relight_many", many)
+    monkeypatch.setattr(PACKAGE.core, "relight", one)
+    monkeypatch.setattr(PACKAGE.core, "relight_many", many)
     bpy.context.scene.radiosity_groups["Spot"].strength = 1.0
     spot.data.energy = 15.0
     expected = fresh(*objects)
@@ -645,15 +645,15 @@ def test_relight_of_a_change_that_is_not_a_group_scaled_solves(package, fixed_cu
     bulb.lightgroup = spot.lightgroup = "Lights"
     bake()
     assert [g.name for g in bpy.context.scene.radiosity_groups] == ["Lights"]
-    calls, one = [], relight.core.relight
-    monkeypatch.setattr(relight.core, "relight",
+    calls, one = [], PACKAGE.core.relight
+    monkeypatch.setattr(PACKAGE.core, "relight",
                         lambda result, **kw: calls.append(sorted(kw)) or one(result, **kw))
     bulb.data.energy *= 3.0
     assert bpy.ops.radiosity.relight() == {"FINISHED"}
     assert calls == [["emission", "lights"]]
     assert not json.loads(bpy.context.scene.radiosity.last_report)["relight"]["summed"]
     relit = [colours_and_lux(o) for o in objects]
-    monkeypatch.setattr(relight.core, "relight", one)
+    monkeypatch.setattr(PACKAGE.core, "relight", one)
     assert_close(relit[1], fresh(objects[1])[0])
 
 
@@ -666,17 +666,17 @@ def test_relight_after_deleting_every_light_is_a_sum_with_the_lights_at_zero(pac
     objects, _, lights, baked = lamp_and_two_lights()
     for obj in lights:
         bpy.data.objects.remove(obj)
-    calls, many = [], relight.core.relight_many
+    calls, many = [], PACKAGE.core.relight_many
 
-    monkeypatch.setattr(relight.core, "relight", no_solve)
-    monkeypatch.setattr(relight.core, "relight_many",
+    monkeypatch.setattr(PACKAGE.core, "relight", no_solve)
+    monkeypatch.setattr(PACKAGE.core, "relight_many",
                         lambda result, changes: calls.append(len(changes)) or many(result,
                                                                                   changes))
     assert bpy.ops.radiosity.relight() == {"FINISHED"}
     assert calls == [3]          # the groups' solutions, made once; then only summed
     assert json.loads(bpy.context.scene.radiosity.last_report)["relight"]["summed"]
     summed = [colours_and_lux(o) for o in objects]
-    monkeypatch.setattr(relight.core, "relight_many", many)
+    monkeypatch.setattr(PACKAGE.core, "relight_many", many)
     expected = fresh(*objects)
     assert np.abs(expected[0][1]).max() < 0.9 * np.abs(baked[0][1]).max()   # the lights counted
     assert_near(summed, expected, baked)

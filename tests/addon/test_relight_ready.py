@@ -45,8 +45,8 @@ def test_the_panel_bake_makes_every_group_so_its_first_relight_solves_nothing(
     expected = [colours_and_lux(o) for o in objects]
     bulb.data.energy /= 2.0
 
-    calls, many = [], relight.core.relight_many
-    monkeypatch.setattr(relight.core, "relight_many", lambda result, changes, **kw: calls.append(
+    calls, many = [], PACKAGE.core.relight_many
+    monkeypatch.setattr(PACKAGE.core, "relight_many", lambda result, changes, **kw: calls.append(
         (threading.current_thread().name, len(changes), sorted(kw))) or many(result, changes,
                                                                              **kw))
     _start_modal()
@@ -64,8 +64,8 @@ def test_the_panel_bake_makes_every_group_so_its_first_relight_solves_nothing(
     report = json.loads(scene.radiosity.last_report)
     assert report["timings"]["light_groups"] > 0.0 and report["warnings"] == []
 
-    monkeypatch.setattr(relight.core, "relight", no_solve)
-    monkeypatch.setattr(relight.core, "relight_many", no_solve)
+    monkeypatch.setattr(PACKAGE.core, "relight", no_solve)
+    monkeypatch.setattr(PACKAGE.core, "relight_many", no_solve)
     bulb.data.energy *= 2.0
     assert bpy.ops.radiosity.relight() == {"FINISHED"}
     assert json.loads(scene.radiosity.last_report)["relight"]["summed"]
@@ -81,13 +81,13 @@ def test_escape_while_the_groups_are_made_cancels_the_bake_and_writes_nothing(pa
     room()                                                   # a lamp and a bulb: two groups
     bpy.context.scene.radiosity.output_mode = "VERTICES"
     before = _snapshot()
-    inside, escaped, many = threading.Event(), threading.Event(), relight.core.relight_many
+    inside, escaped, many = threading.Event(), threading.Event(), PACKAGE.core.relight_many
 
     def many_after_escape(result, changes, **kw):
         inside.set()
         assert escaped.wait(60)
         return many(result, changes, **kw)
-    monkeypatch.setattr(relight.core, "relight_many", many_after_escape)
+    monkeypatch.setattr(PACKAGE.core, "relight_many", many_after_escape)
     _start_modal()
     me = _Operator()
     assert inside.wait(120)                    # the worker makes the groups: the user presses Esc

@@ -286,6 +286,37 @@ def scenario():
     bulb.data.energy *= 0.5
     yield 0.3
 
+    # A Relight that solves (the bulb moved: its light cast again on the kept form factors)
+    # runs in a worker from the same button, its progress in the status, as the bake's: the
+    # bulb moved, then moved back (the bake's light again: the bake's colours).
+    where = tuple(bulb.location)
+    for step, place in (("moved", (where[0] - 0.15, where[1], where[2] - 0.15)),
+                        ("back", where)):
+        bulb.location = place
+        with bpy.context.temp_override(window=window, area=area, region=ui):
+            results[f"relight_{step}"] = sorted(bpy.ops.radiosity.relight("INVOKE_DEFAULT"))
+        statuses, t0 = [], time.perf_counter()
+        while running() and time.perf_counter() - t0 < STEP_LIMIT:
+            statuses.append(bpy.context.window_manager.radiosity_status)
+            if step == "moved" and "during_relight.png" not in results.get("screenshots", {}) \
+                    and statuses[-1].startswith("Relight: mesh"):
+                redraw()
+                yield 0.2                  # the panel's bar and the status bar drawn
+                screenshot("during_relight.png")
+            yield SAMPLE
+        yield 0.3
+        results[f"relight_{step}_statuses"] = sorted(set(statuses))
+        results[f"relight_{step}_report"] = json.loads(
+            bpy.context.scene.radiosity.last_report)["relight"]
+        results[f"relight_{step}_error"] = apart(colours(), baked, 1.0)
+    # Each run made every group's own solution after writing: a group change is a sum.
+    groups[-1].strength = 0.5
+    yield 0.3
+    results["group_after_solve"] = json.loads(bpy.context.scene.radiosity.last_report)["relight"]
+    groups[-1].strength = 1.0
+    yield 0.3
+    results["group_after_solve_error"] = apart(colours(), baked, 1.0)
+
     # The light's panel: a spot light made active, Properties > Light data shows its Radiosity
     # panel (the IES / EULUMDAT file field).
     lamp = bpy.data.objects.new("Spot", bpy.data.lights.new("Spot", "SPOT"))
