@@ -48,12 +48,17 @@ class _Running:
 
 class ModalJob:
     """A modal operator that drives a :class:`job.Worker` (mixed into the bake's and Relight's
-    operators): its timer, the progress bar and status, Esc. A subclass starts its worker with
+    operators): not offered while either runs (poll), its timer, the progress bar and status,
+    Esc. A subclass starts its worker with
     :meth:`_start` and writes its result in ``_finish_job(context, job)`` (main thread)."""
 
     @staticmethod
     def running():
         return _Running.job is not None
+
+    @classmethod
+    def poll(cls, context):
+        return context.scene is not None and not ModalJob.running()
 
     def _start(self, context, worker):
         self._continue(context, worker)
@@ -82,7 +87,7 @@ class ModalJob:
             job.cancel()
             _end_display(context)
             _Running.clear()
-            self.report({"ERROR"}, f"{self.bl_label} failed ({type(exc).__name__}): {exc}")
+            self.report({"ERROR"}, f"{self.failed} ({type(exc).__name__}): {exc}")
             return {"CANCELLED"}
 
     def _step(self, context, event, job):
@@ -115,6 +120,21 @@ class ModalJob:
         _end_display(context)
         _Running.clear()
 
+    def _ended(self, context, run):
+        """Run ``run()`` (the report dict, or None: not ended) and report as the operator ends:
+        ``self._done(context, report)``, {'CANCELLED'} (a BakeError: the user's message; a
+        bug: its traceback in the console), or None."""
+        try:
+            report = run()
+        except BakeError as exc:           # the user's error, or writing failed
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        except Exception as exc:  # a bug, not a user error: keep the traceback in the console
+            traceback.print_exc()
+            self.report({"ERROR"}, f"{self.failed} ({type(exc).__name__}): {exc}")
+            return {"CANCELLED"}
+        return None if report is None else self._done(context, report)
+
     def _finish(self, context):
         """The one exit of a modal run: timer, progress and status always cleaned up."""
         _end_display(context)
@@ -132,27 +152,17 @@ class RADIOSITY_OT_bake(ModalJob, bpy.types.Operator):
     bl_label = "Bake Radiosity"
     bl_options = {"REGISTER", "UNDO"}
 
-    @classmethod
-    def poll(cls, context):
-        return context.scene is not None and not ModalJob.running()
+    failed = "Radiosity bake failed"
 
-    def _report_result(self, report):
+    def _done(self, context, report):
         for warning in report.get("warnings", []):
             self.report({"WARNING"}, warning)
         self.report({"INFO"}, _summary_line(report))
+        return {"FINISHED"}
 
     def execute(self, context):
-        try:
-            report = bake_now(context, options_from_props(context.scene.radiosity))
-        except BakeError as exc:
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
-        except Exception as exc:  # a bug, not a user error: keep the traceback in the console
-            traceback.print_exc()
-            self.report({"ERROR"}, f"Radiosity bake failed ({type(exc).__name__}): {exc}")
-            return {"CANCELLED"}
-        self._report_result(report)
-        return {"FINISHED"}
+        return self._ended(context, lambda: bake_now(context, options_from_props(
+            context.scene.radiosity)))
 
     def invoke(self, context, event):
         if bpy.app.background or context.window is None:
@@ -171,14 +181,8 @@ class RADIOSITY_OT_bake(ModalJob, bpy.types.Operator):
         if job.error is not None:
             self.report({"ERROR"}, f"Radiosity bake failed: {job.error}")
             return {"CANCELLED"}
-        try:
-            report = apply(context, job.bake_input, job.result, ready=job.ready,
-                           warnings=job.warnings)
-        except BakeError as exc:
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
-        self._report_result(report)
-        return {"FINISHED"}
+        return self._ended(context, lambda: apply(context, job.bake_input, job.result,
+                                                  ready=job.ready, warnings=job.warnings))
 
 
 def _end_display(context):

@@ -123,10 +123,6 @@ class RADIOSITY_OT_relight(ModalJob, bpy.types.Operator):
     bl_label = "Relight"
     bl_options = {"REGISTER", "UNDO"}
 
-    @classmethod
-    def poll(cls, context):
-        return context.scene is not None and not ModalJob.running()
-
     def execute(self, context):
         window = context.window          # a script's Relight that solves blocks
         if window is not None:
@@ -182,23 +178,15 @@ class RADIOSITY_OT_relight(ModalJob, bpy.types.Operator):
         now = relight.group_weights(context.scene, worker.entry)
         if relight.kept(context.scene) is worker.entry and any(
                 not np.array_equal(w, worker.weights[g]) for g, w in now.items()):
-            _group_changed(None, context)
+            try:                      # cancelled: solve only the groups the sliders weight
+                relight.mix(context, every=False)
+            except job.BakeError as exc:
+                _ERRORS[context.scene.session_uid] = str(exc)
         return {"FINISHED"}
 
-    def _ended(self, context, run):
-        """Run ``run()`` (the report dict, or None: not ended) and report as the operator ends:
-        {'FINISHED'}, {'CANCELLED'} (nothing written), or None."""
-        try:
-            report = run()
-        except job.BakeError as exc:           # RelightError, or writing failed
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
-        except Exception as exc:  # a bug, not a user error: keep the traceback in the console
-            traceback.print_exc()
-            self.report({"ERROR"}, f"Relight failed ({type(exc).__name__}): {exc}")
-            return {"CANCELLED"}
-        if report is None:
-            return None
+    failed = "Relight failed"
+
+    def _done(self, context, report):
         _ERRORS.pop(context.scene.session_uid, None)
         for warning in report.get("warnings", []):
             self.report({"WARNING"}, warning)

@@ -683,8 +683,8 @@ class _Operator:
     def __init__(self, cls=None):
         self.reports = []
         self.cls = cls or PACKAGE.radiosity_addon.operators.RADIOSITY_OT_bake
-        self.bl_label = self.cls.bl_label
-        for name in ("_step", "_finish", "_finish_job", "_report_result", "_ended", "_start",
+        self.bl_label, self.failed = self.cls.bl_label, self.cls.failed
+        for name in ("_step", "_finish", "_finish_job", "_done", "_ended", "_start",
                      "_continue", "_groups_made"):
             if hasattr(self.cls, name):              # its helpers, bound to the stand-in
                 setattr(self, name, getattr(self.cls, name).__get__(self))

@@ -38,20 +38,25 @@ def _start_relight():
     return _Operator(relight_ops.RADIOSITY_OT_relight), pending
 
 
-@pytest.fixture
-def held(monkeypatch):
-    """core.relight holds its first call until ``go`` is set (``inside`` is set there): the
-    user acts while the worker solves. Records each call's thread."""
-    inside, go, threads, real = threading.Event(), threading.Event(), [], PACKAGE.core.relight
+def holding(monkeypatch, name):
+    """core.<name> (relight or relight_many) holds its first call until ``go`` is set
+    (``inside`` is set there): the user acts while a worker runs. Records each call's thread."""
+    inside, go, threads, real = threading.Event(), threading.Event(), [], getattr(PACKAGE.core,
+                                                                                   name)
 
-    def holding(result, **kw):
+    def held(result, *args, **kw):
         threads.append(threading.current_thread().name)
         if len(threads) == 1:
             inside.set()
             assert go.wait(60)
-        return real(result, **kw)
-    monkeypatch.setattr(PACKAGE.core, "relight", holding)
+        return real(result, *args, **kw)
+    monkeypatch.setattr(PACKAGE.core, name, held)
     return inside, go, threads
+
+
+@pytest.fixture
+def held(monkeypatch):
+    return holding(monkeypatch, "relight")
 
 
 def _colours(objects):
@@ -189,13 +194,7 @@ def test_escape_while_the_groups_are_made_after_a_relight_keeps_the_relight(
     # group slider moved meanwhile is mixed in when the run ends.
     scene = bpy.context.scene
     objects, lamp, (bulb, spot), baked = lamp_and_two_lights()
-    inside, escaped, many = threading.Event(), threading.Event(), PACKAGE.core.relight_many
-
-    def many_after_escape(result, changes, **kw):
-        inside.set()
-        assert escaped.wait(60)
-        return many(result, changes, **kw)
-    monkeypatch.setattr(PACKAGE.core, "relight_many", many_after_escape)
+    inside, escaped, threads = holding(monkeypatch, "relight_many")
     bulb.location.x += 0.4
     me, pending = _start_relight()
     while not inside.wait(0.05):                 # ticks until the groups' worker runs
@@ -207,6 +206,7 @@ def test_escape_while_the_groups_are_made_after_a_relight_keeps_the_relight(
     escaped.set()
     result, reports = drive(me)
     assert result == {"FINISHED"}, reports
+    assert threads[0] == "radiosity-groups"      # (then the slider's group alone, at the end)
     assert any("Light groups not made (cancelled)" in text for _, text in reports)
     assert relight.kept(scene) is pending.work
     # The slider's mix, made at the run's end: the lamp's own solution (solved then) at 0.5.

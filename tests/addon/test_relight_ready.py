@@ -18,6 +18,7 @@ from conftest import PACKAGE
 from test_operator import _Event, _modal, _Operator, _snapshot, _start_modal, drive
 from test_relight import fixed_cubes  # noqa: F401 (a fixture)
 from test_relight import colours_and_lux, lamp_and_two_lights, no_solve, room
+from test_relight_modal import holding
 
 relight = PACKAGE.radiosity_addon.relight
 job = PACKAGE.radiosity_addon.job
@@ -81,13 +82,7 @@ def test_escape_while_the_groups_are_made_cancels_the_bake_and_writes_nothing(pa
     room()                                                   # a lamp and a bulb: two groups
     bpy.context.scene.radiosity.output_mode = "VERTICES"
     before = _snapshot()
-    inside, escaped, many = threading.Event(), threading.Event(), PACKAGE.core.relight_many
-
-    def many_after_escape(result, changes, **kw):
-        inside.set()
-        assert escaped.wait(60)
-        return many(result, changes, **kw)
-    monkeypatch.setattr(PACKAGE.core, "relight_many", many_after_escape)
+    inside, escaped, threads = holding(monkeypatch, "relight_many")
     _start_modal()
     me = _Operator()
     assert inside.wait(120)                    # the worker makes the groups: the user presses Esc
@@ -95,6 +90,7 @@ def test_escape_while_the_groups_are_made_cancels_the_bake_and_writes_nothing(pa
     escaped.set()
     result, reports = drive(me)
     assert result == {"CANCELLED"}, reports
+    assert threads == ["radiosity-bake"]
     assert any("cancelled" in text for _, text in reports)
     assert _snapshot() == before and relight.kept(bpy.context.scene) is None
 

@@ -241,6 +241,7 @@ def scenario():
     # The lux display, as its button runs it: false colour in the viewport and the legend drawn
     # by the draw handler (where the bar went is read back to check its pixels).
     luxview = __import__(MODULE + ".radiosity_addon.luxview", fromlist=["DRAWN"])
+    relight = __import__(MODULE + ".radiosity_addon.relight", fromlist=["kept"])
     with bpy.context.temp_override(window=window, area=area, region=ui):
         results["lux_display"] = sorted(bpy.ops.radiosity.lux_display())
     redraw()
@@ -309,6 +310,9 @@ def scenario():
         results[f"relight_{step}_report"] = json.loads(
             bpy.context.scene.radiosity.last_report)["relight"]
         results[f"relight_{step}_error"] = apart(colours(), baked, 1.0)
+        entry = relight.kept(bpy.context.scene)
+        results[f"relight_{step}_groups_made"] = sorted(entry.basis) == list(
+            range(len(entry.units)))
     # Each run made every group's own solution after writing: a group change is a sum.
     groups[-1].strength = 0.5
     yield 0.3

@@ -180,7 +180,7 @@ def test_a_relight_that_solves_runs_in_its_worker_from_the_button(session):
         assert results[f"relight_{step}_report"]["summed"] is False
         statuses = results[f"relight_{step}_statuses"]
         assert any(s.startswith("Relight: ") for s in statuses), statuses
-        assert any(s.startswith("Light groups: ") for s in statuses), statuses
+        assert results[f"relight_{step}_groups_made"] is True     # (its status may be brief)
         assert all(s == "Starting" or s.startswith(("Relight: ", "Light groups: "))
                    for s in statuses), statuses
     # Moved, the radiosity mesh is made again where the bulb's light now changes (apart: None,
