@@ -49,8 +49,8 @@ class _Running:
 class ModalJob:
     """A modal operator that drives a :class:`job.Worker` (mixed into the bake's and Relight's
     operators): not offered while either runs (poll), its timer, the progress bar and status,
-    Esc. A subclass starts its worker with
-    :meth:`_start` and writes its result in ``_finish_job(context, job)`` (main thread)."""
+    Esc. A subclass starts its worker with :meth:`_start`, writes its result in
+    ``_finish_job(context, job)`` (main thread) and reports a written one in ``_done``."""
 
     @staticmethod
     def running():
@@ -228,8 +228,8 @@ def register():
 
 
 def unregister():
-    # A bake or Relight still running (quit or disable mid-run): stop the worker; the modal handler ends
-    # itself on its next event. Nothing is written.
+    # A bake or Relight still running (quit or disable mid-run): stop the worker; the modal
+    # handler ends itself on its next event. Nothing is written.
     job = _Running.job
     if job is not None:
         job.cancel()
