@@ -107,10 +107,10 @@ class GroupsJob(job.Worker):
 
     def __init__(self, entry, weights):
         super().__init__()
-        self.entry, self.weights, self.made = entry, weights, False
+        self.entry, self.weights = entry, weights
 
     def _work(self):
-        self.made = relight.make_groups(
+        relight.make_groups(
             self.entry, lambda f, m: self._progress(f, f"Light groups: {m}"),
             self._cancel.is_set, "groups made after the relight")
 
