@@ -141,10 +141,24 @@ def prepared(bake_input, result, units, progress=None, cancel=None):
     return entry
 
 
+def _all_made(entry):
+    """Whether every group's own solution of a kept bake is made."""
+    return all(k in entry.basis for k in range(len(entry.units)))
+
+
 def needs_groups(entry):
     """Whether a kept bake has two groups or more and not every group's own solution."""
-    return entry is not None and len(entry.units) > 1 \
-        and any(k not in entry.basis for k in range(len(entry.units)))
+    return entry is not None and len(entry.units) > 1 and not _all_made(entry)
+
+
+def weights_moved(now, before):
+    """Whether a group slider moved: ``now`` ({group: (3,)}) against ``before``."""
+    return any(not np.array_equal(w, before[g]) for g, w in now.items())
+
+
+def _calls(progress, cancel):
+    """The progress and cancel keywords core calls take, those given."""
+    return {k: f for k, f in dict(progress=progress, cancel=cancel).items() if f is not None}
 
 
 def make_groups(entry, progress=None, cancel=None, label="groups made"):
@@ -153,8 +167,7 @@ def make_groups(entry, progress=None, cancel=None, label="groups made"):
     group change is a weighted sum; False when a group alone re-meshes (nothing made: the first
     change solves, as before). Its seconds go to ``entry.seconds[label]``."""
     t0 = time.perf_counter()
-    entry.calls = {k: f for k, f in dict(progress=progress, cancel=cancel).items()
-                   if f is not None}
+    entry.calls = _calls(progress, cancel)
     try:
         solving.solutions(entry, range(len(entry.units)))
     except RelightError:
@@ -279,8 +292,7 @@ class Pending:
     @property
     def instant(self):
         """A weighted sum of solutions already made: no solve, no need for a worker."""
-        return self.scale is not None and all(k in self.entry.basis
-                                              for k in range(len(self.entry.units)))
+        return self.scale is not None and _all_made(self.entry)
 
 
 def _copy(entry):
@@ -338,7 +350,7 @@ def compute(pending, progress=None, cancel=None):
     """Solve a begun Relight on its copy of the kept bake (any thread; ``progress``,
     ``cancel``: as core.relight's, core.BakeCancelled when cancelled); returns ``pending``."""
     emission, back, lights, factor = pending.light
-    calls = {k: f for k, f in dict(progress=progress, cancel=cancel).items() if f is not None}
+    calls = _calls(progress, cancel)
     work = pending.work
     work.calls = calls
     try:
@@ -390,8 +402,7 @@ def finish(context, pending):
         raise RelightError(f"Relight: the kept bake was cleared while it ran; {BAKE_AGAIN}")
     work, solution = pending.work, pending.solution
     now = group_weights(scene, work)
-    if any(not np.array_equal(w, pending.weights[g]) for g, w in now.items()) \
-            and solving.summable(work, now):
+    if weights_moved(now, pending.weights) and solving.summable(work, now):
         solution = solving.mixed(work, now)     # a slider moved while it ran: no solve
         pending.weights = dict(pending.weights, **now)
     report = _write(context, work, solution, time.perf_counter() - pending.t0,

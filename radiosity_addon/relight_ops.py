@@ -176,8 +176,8 @@ class RADIOSITY_OT_relight(ModalJob, bpy.types.Operator):
             self.report({"WARNING"}, f"Light groups not made ({type(worker.error).__name__}: "
                                      f"{worker.error}); the first group change makes them")
         now = relight.group_weights(context.scene, worker.entry)
-        if relight.kept(context.scene) is worker.entry and any(
-                not np.array_equal(w, worker.weights[g]) for g, w in now.items()):
+        if relight.kept(context.scene) is worker.entry \
+                and relight.weights_moved(now, worker.weights):
             try:                      # cancelled: solve only the groups the sliders weight
                 relight.mix(context, every=False)
             except job.BakeError as exc:
