@@ -211,6 +211,64 @@ def test_the_default_samples_keep_a_penumbra_under_the_mesh_contrast():
     assert err.mean() < PENUMBRA_MEAN
 
 
+def _edge_fraction(t):
+    """Visible fraction of a disk whose part beyond t (in radii, from its centre) is hidden."""
+    t = np.clip(t, -1, 1)
+    return (np.arccos(t) - t * np.sqrt(1 - t * t)) / np.pi
+
+
+def _sun_edge_scene(angle, h=1.0):
+    """A black half-plane (x < 0) at height h over a grey floor, a sun at the zenith of angular
+    diameter ``angle``: a floor point at x sees the sun's directions whose tangent-plane offset
+    u (along x) exceeds -x / h, so its visible fraction is that of a disk of radius
+    tan(angle / 2) cut at u = -x / h (:func:`_edge_fraction`). The half-width of the penumbra
+    is h tan(angle / 2)."""
+    big = [[-3.0, -3.0, h], [-3.0, 3.0, h], [0.0, 3.0, h], [0.0, -3.0, h]]       # faces down
+    sun = dict(kind="sun", name="Sun", direction=(0, 0, -1.0), strength=3.0, angle=angle)
+    return _floor(lights=[sun], extra=[big])
+
+
+@pytest.mark.parametrize("angle", [0.1, 0.4])
+def test_penumbra_of_a_straight_edge_under_a_sun_of_some_angle(angle):
+    """The sun's angle softens its shadow as a disk of directions does: across the edge the
+    light is the closed form's visible fraction (64 rays: the disk light's tolerances above),
+    exactly 0 in the umbra and the whole S / pi outside the penumbra."""
+    h, n = 1.0, 201
+    scene = _sun_edge_scene(angle, h)
+    half = h * np.tan(angle / 2)
+    direct = DirectLight(scene.lights, make_patches(scene, 0.5), samples=64)
+    x = np.linspace(-1.5 * half, 1.5 * half, n)
+    pts = np.stack([x, np.linspace(-0.3, 0.3, n), np.zeros_like(x)], axis=1)
+    got = direct.incident(pts, np.tile([0, 0, 1.0], (n, 1)))[:, 0]
+    bare = 3.0 / np.pi                   # zenith sun, floor facing it: S cos 0 / pi
+    err = (got - bare * _edge_fraction(-x / half)) / bare
+    assert np.abs(err).mean() < PENUMBRA_MEAN
+    assert np.abs(err).max() < PENUMBRA_MAX
+    assert np.all(got[x < -half - 1e-3] == 0)
+    np.testing.assert_allclose(got[x > half + 1e-3], bare, rtol=1e-12)
+
+
+def test_a_baked_floor_under_a_sun_of_some_angle_has_the_closed_form_penumbra():
+    """The whole bake at defaults: the radiosity mesh refines across the sun's soft edge, and
+    its corners there read rho x S / pi x the closed form's visible fraction. The floor sees no
+    lit surface (the plate is black, no world), so the corners hold direct light only. Held to
+    the mesh's own contrast (a corner's light is its gather point's, within a leaf's size of it)
+    at the worst corner and to the disk light's mean tolerance on average."""
+    angle, h = 0.4, 1.0
+    half = h * np.tan(angle / 2)
+    result = bake(_sun_edge_scene(angle, h), BakeSettings())
+    pts, colours, face = _output(result)
+    on = (face == 0) & (np.abs(pts[:, 1]) < 1.5)
+    x, got = pts[on, 0], colours[on, 0]
+    bare = RHO * 3.0 / np.pi
+    across = np.abs(x) < half
+    assert np.count_nonzero(across) >= 20, "the penumbra was not refined"
+    err = (got - bare * _edge_fraction(-x / half)) / bare
+    assert np.abs(err[across]).mean() < PENUMBRA_MEAN
+    assert np.abs(err).max() < BakeSettings().contrast
+    assert np.all(got[x < -half - 0.01] < 1e-3 * bare)
+
+
 def _closed_box(sx, sy, sz, lights, rho=RHO):
     V = np.array([[x, y, z] for z in (0, sz) for y in (0, sy) for x in (0, sx)], float)
     F = [f[::-1] for f in [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2],
