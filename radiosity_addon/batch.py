@@ -115,6 +115,10 @@ def build_parser(need_input):
                         "and sun light by its object's name, 'World', or Blender's light "
                         "groups; the report lists them). A weighted sum of each named group's "
                         "own solution (solved together on the kept form factors): no new bake")
+    p.add_argument("--relight", nargs="?", const="", metavar="FILE.radiosity",
+                   help="do not bake: relight the input's kept bake (FILE, default the input's "
+                        "name with .radiosity, written by --save-relight or Save Relight Data) "
+                        "with the light as the .blend holds it now, on its form factors")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="run the bake's hemicube calls on a Dask distributed cluster: a "
                         "scheduler's address (tcp://host:8786), a scheduler file (.json, on "
@@ -355,19 +359,30 @@ def run(argv):
         value = getattr(args, key)
         if value is not None:
             options[key] = None if value is AUTO else value
-    with _cluster(args, options):
-        try:
-            bake_input = prepare(bpy.context, options)
-            report = apply(bpy.context, bake_input, compute(bake_input))
-        except BakeError as exc:
-            raise BatchError(str(exc))
+    if args.relight is not None:
+        report, bake_input = _relight(bpy.context, args, src, args_list)
+    else:
+        with _cluster(args, options):
+            try:
+                bake_input = prepare(bpy.context, options)
+                report = apply(bpy.context, bake_input, compute(bake_input))
+            except BakeError as exc:
+                raise BatchError(str(exc))
     if args.group_strength:
         report = _apply_groups(bpy.context, args.group_strength)
     report["input"] = src
     report["output"] = out
-    _atomic_write("--in-place" if args.in_place else "--output", out_given, out,
-                  lambda tmp: bpy.ops.wm.save_as_mainfile(
-                      filepath=tmp, copy=True, compress=False, check_existing=False))
+    from . import kept_file
+    with kept_file.held():
+        _atomic_write("--in-place" if args.in_place else "--output", out_given, out,
+                      lambda tmp: bpy.ops.wm.save_as_mainfile(
+                          filepath=tmp, copy=True, compress=False, check_existing=False))
+    if options["save_relight"] if args.save_relight is None else args.save_relight:
+        try:
+            report["relight_data"], size = kept_file.save_scene(bpy.context.scene, out)
+        except kept_file.RelightError as exc:
+            raise BatchError(f"--save-relight: {exc}") from None
+        _say(f"kept bake for Relight ({size / 2 ** 20:.0f} MB) -> {report['relight_data']}")
     # One line per file as it is written: should Blender abort in the render (no GPU), the
     # console still says what was done.
     _say(f"baked {report.get('patches', '?')} patches in "
@@ -398,6 +413,26 @@ def run(argv):
         _atomic_write("--report", args.report, report_path, dump)
         _say(f"report -> {args.report}")
     return report
+
+
+def _relight(context, args, src, given):
+    """--relight: the input's kept bake relit with the light the .blend holds (kept_file);
+    (report, the kept bake's input). Bake options are refused: they need a new bake."""
+    from . import kept_file
+    from .props import OPTIONS
+    flags = {"--" + row.name.replace("_", "-") for row in OPTIONS if row.name != "save_relight"}
+    bad = sorted({a.split("=")[0].replace("--no-", "--") for a in given} & flags)
+    bad += ["--scheduler"] if args.scheduler else []
+    if bad:
+        raise BatchError(f"--relight re-solves the kept bake, so {', '.join(bad)} would need a "
+                         f"new bake; leave out --relight to bake")
+    path = os.path.abspath(args.relight) if args.relight else kept_file.beside(src)
+    try:
+        done = kept_file.relight_from(context, path)
+    except kept_file.RelightError as exc:
+        raise BatchError(f"--relight: {exc}") from None
+    _say(f"relit the kept bake of {path}")
+    return done
 
 
 @contextlib.contextmanager

@@ -144,6 +144,7 @@ def draw_advanced(layout, props):
     sub.prop(props, "gap_cuts")
     col.prop(props, "selected_only")
     col.prop(props, "make_single_user")
+    col.prop(props, "save_relight")
 
 
 class VIEW3D_PT_radiosity_last(bpy.types.Panel):

@@ -21,6 +21,9 @@ ADDON_OPTIONS = (
     Setting("make_single_user", "bool", False, "Single User",
             "Give objects that share a mesh their own copy, so each gets its own lighting "
             "(otherwise such a bake stops with a message)"),
+    Setting("save_relight", "bool", False, "Save Relight Data",
+            "When the .blend is saved, write the kept bake beside it (<name>.radiosity, "
+            "as large as the Kept size under Relight), so Relight works after reopening it"),
 )
 
 #: Every bake option of the panel and the batch script, in the panel's order.

@@ -2,10 +2,11 @@
 
 After a bake, :func:`keep` holds the core's ``BakeResult`` (its form factors, gather rows and
 radiosity mesh) and the extraction that says where its colours go, in this module (``_KEPT``,
-keyed by the scene's ``session_uid``): in memory, for this Blender session only. Nothing is
-saved with the .blend (the office sample keeps 458 MB, mostly the radiosity mesh's gather rows);
-after reopening a file, or Clear Bake, there is nothing to relight: :func:`relight` says to bake
-again.
+keyed by the scene's ``session_uid``): in memory, for this Blender session. Nothing of it is
+saved in the .blend (the office sample keeps 248 MB, mostly the radiosity mesh's gather rows);
+with Save Relight Data on, saving the .blend writes it beside the file (:mod:`kept_file`) and a
+Relight after reopening reads it back (:func:`kept_or_file`). Otherwise, after reopening a
+file, or Clear Bake, there is nothing to relight: :func:`relight` says to bake again.
 
 * **Relight** (:func:`relight`): reads the scene again; if anything but the emissive materials'
   strength and colour and the point, spot and sun lights changed, it stops (bake again). Each
@@ -39,6 +40,7 @@ panel's bake.
 """
 
 import json
+import os
 import time
 import traceback
 from contextlib import contextmanager
@@ -47,7 +49,7 @@ from dataclasses import dataclass, field, replace
 import bpy
 import numpy as np
 
-from . import job, relight_solve as solving, surfaces
+from . import job, kept_file, relight_solve as solving, surfaces
 from .light_units import Solution, units as light_units
 from .same import BAKE_AGAIN, RelightError, check_baked, read, unit_factors
 
@@ -87,6 +89,26 @@ class Kept:
 def kept(scene):
     """The scene's kept bake, or None."""
     return _KEPT.get(scene.session_uid)
+
+
+def kept_or_file(scene, path=None):
+    """The scene's kept bake; when none is kept in memory, the one in the kept bake file at
+    ``path`` (default: beside the .blend, when there is one: :mod:`kept_file`), which is kept
+    from then on; None when neither. Raises kept_file.KeptFileError when the file is not this
+    scene's bake."""
+    entry = kept(scene)
+    if path is None:
+        path = bpy.data.filepath and kept_file.beside(bpy.data.filepath)
+        if not path or not os.path.isfile(path):
+            return entry
+    if entry is not None:
+        return entry
+    entry = kept_file.load(path, scene)
+    _KEPT[scene.session_uid] = entry
+    _TOO_BIG.pop(scene.session_uid, None)
+    if group_names(entry) != [g.name for g in scene.radiosity_groups]:
+        _ops().set_groups(scene, group_names(entry), keep_values=True)
+    return entry
 
 
 def keep(scene, bake_input, result, ready=None):
@@ -317,15 +339,16 @@ def begin(context):
     """Read the scene's light for a Relight of its kept bake (main thread); a :class:`Pending`.
     Raises RelightError when there is no kept bake or the scene changed otherwise."""
     scene = context.scene
-    entry = kept(scene)
+    entry = kept_or_file(scene)
     if entry is None:
         big = _TOO_BIG.get(scene.session_uid)
         if big is not None:
             raise RelightError(f"Relight: the last bake was not kept in memory (it needs "
                                f"{big[0]:.0f} MB, above the Memory Budget of {big[1]:.0f} MB); "
                                f"{BAKE_AGAIN}")
-        raise RelightError(f"Relight: no bake is kept in memory for this scene (bakes are not "
-                           f"kept in the saved file); {BAKE_AGAIN}")
+        raise RelightError(f"Relight: no bake is kept in memory for this scene (the .blend "
+                           f"holds none; Save Relight Data writes it beside the file); "
+                           f"{BAKE_AGAIN}")
     if context.mode != "OBJECT":
         raise RelightError("Switch to Object Mode to relight")
     check_baked(scene, entry)
@@ -439,7 +462,7 @@ def mix(context, every=True):
     """Write the light groups' weighted sum (no solve once the groups' solutions are kept).
     ``every``: a missing solution makes every group's (the panel: the next change is a sum);
     False: only the weighted groups' (the batch)."""
-    entry = kept(context.scene)
+    entry = kept_or_file(context.scene)
     if entry is None:
         raise RelightError(f"Light groups: no bake is kept in memory; {BAKE_AGAIN}")
     t0 = time.perf_counter()

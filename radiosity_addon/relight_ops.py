@@ -8,6 +8,7 @@ at once (no solve once the groups' solutions are kept). :func:`set_groups` fills
 progress and Esc, as the bake's); a Relight that is a weighted sum is written at once.
 """
 
+import os
 import traceback
 
 import bpy
@@ -15,7 +16,7 @@ import numpy as np
 from bpy.app.handlers import persistent
 
 from ..core.errors import BakeCancelled
-from . import job, relight
+from . import job, kept_file, relight
 from .operators import ModalJob
 
 #: The last light-group error per scene (an update callback cannot report): the panel shows it.
@@ -252,6 +253,29 @@ def _forget(*_args):
     _ERRORS.clear()
 
 
+@persistent
+def _save_kept(path="", *_args):
+    """The .blend is saved: with Save Relight Data on, or a kept bake file already beside it
+    (the two stay one), its scenes' kept bakes go beside it."""
+    path = path if isinstance(path, str) and path else bpy.data.filepath
+    there = bool(path) and os.path.isfile(kept_file.beside(path))
+    scenes = {}
+    for scene in bpy.data.scenes:
+        props = getattr(scene, "radiosity", None)
+        entry = relight.kept(scene)
+        if props is not None and (props.save_relight or there) and entry is not None:
+            scenes[scene] = entry
+    try:
+        written = kept_file.with_blend(path, scenes)
+    except kept_file.KeptFileError as exc:
+        print(f"Radiosity: {exc}")
+        for scene in scenes:
+            _ERRORS[scene.session_uid] = str(exc)
+        return
+    if written:
+        print(f"Radiosity: kept bake written beside the .blend -> {written}")
+
+
 CLASSES = (RADIOSITY_PG_group, RADIOSITY_OT_relight, RADIOSITY_OT_groups_reset,
            RADIOSITY_OT_relight_forget)
 
@@ -261,11 +285,14 @@ def register():
         bpy.utils.register_class(cls)
     bpy.types.Scene.radiosity_groups = bpy.props.CollectionProperty(type=RADIOSITY_PG_group)
     bpy.app.handlers.load_pre.append(_forget)
+    bpy.app.handlers.save_post.append(_save_kept)
 
 
 def unregister():
     if _forget in bpy.app.handlers.load_pre:
         bpy.app.handlers.load_pre.remove(_forget)
+    if _save_kept in bpy.app.handlers.save_post:
+        bpy.app.handlers.save_post.remove(_save_kept)
     relight.drop()
     del bpy.types.Scene.radiosity_groups
     for cls in reversed(CLASSES):

@@ -321,6 +321,26 @@ def scenario():
     yield 0.3
     results["group_after_solve_error"] = apart(colours(), baked, 1.0)
 
+    # Save Relight Data: saving the file (File > Save As) writes the kept bake beside it (the
+    # save handler, in a real Blender); with the bake in memory forgotten, as after reopening,
+    # the Relight button reads it back and writes the same colours.
+    bpy.context.scene.radiosity.save_relight = True
+    bpy.ops.wm.save_as_mainfile(filepath=os.path.join(OUT, "saved.blend"))
+    yield 0.3
+    side = os.path.join(OUT, "saved.radiosity")
+    results["relight_file_mb"] = os.path.getsize(side) / 2 ** 20 if os.path.isfile(side) \
+        else None
+    before = colours()
+    relight.drop(bpy.context.scene)
+    with bpy.context.temp_override(window=window, area=area, region=ui):
+        results["relight_from_file"] = sorted(bpy.ops.radiosity.relight("INVOKE_DEFAULT"))
+    t0 = time.perf_counter()
+    while running() and time.perf_counter() - t0 < STEP_LIMIT:
+        yield SAMPLE
+    yield 0.3
+    results["relight_from_file_kept"] = relight.kept(bpy.context.scene) is not None
+    results["relight_from_file_error"] = apart(colours(), before, 1.0)
+
     # The light's panel: a spot light made active, Properties > Light data shows its Radiosity
     # panel (the IES / EULUMDAT file field).
     lamp = bpy.data.objects.new("Spot", bpy.data.lights.new("Spot", "SPOT"))

@@ -194,6 +194,17 @@ def test_a_relight_that_solves_runs_in_its_worker_from_the_button(session):
     assert results["group_after_solve_error"] < RECAST_RTOL
 
 
+def test_saving_the_file_keeps_the_bake_beside_it_and_relight_reads_it_back(session):
+    """Save Relight Data on, File > Save As writes saved.radiosity beside the .blend (Blender's
+    save handler); with nothing kept in memory, the Relight button reads it back and, the light
+    unchanged, writes the colours it had (float32 at the write)."""
+    results, _ = session
+    assert results["relight_file_mb"] is not None and results["relight_file_mb"] > 1.0
+    assert results["relight_from_file"] == ["FINISHED"]
+    assert results["relight_from_file_kept"] is True
+    assert results["relight_from_file_error"] < 1e-6
+
+
 @pytest.mark.parametrize("name", ["before_bake.png", "during_bake.png", "after_bake.png",
                                   "advanced_open.png", "light_panel.png", "lux_view.png",
                                   "after_relight.png", "during_relight.png"])
