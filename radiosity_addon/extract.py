@@ -225,7 +225,7 @@ def _is_visible(inst, view_layer, selected_only):
     return obj.select_get(view_layer=view_layer) if selected_only else True
 
 
-def extract(depsgraph, *, selected_only=False):
+def extract(depsgraph, *, selected_only=False, world=True):
     """Read the evaluated scene into the core's arrays.
 
     Objects that show a baked mesh are read with their original mesh and modifiers
@@ -238,6 +238,9 @@ def extract(depsgraph, *, selected_only=False):
     selected_only : bool
         Only selected mesh objects (and instances whose instancer is selected) take part and are
         written. Lights always take part.
+    world : bool
+        Read the scene's world (its light, and its sun disc as a sun light); False when the
+        bake's ``sky`` setting replaces it (``sky='cie_overcast'``: an overcast sky has no sun).
 
     Returns
     -------
@@ -247,10 +250,10 @@ def extract(depsgraph, *, selected_only=False):
     from .write import originals_for_reading   # write imports this module
 
     with originals_for_reading(depsgraph.scene, depsgraph):
-        return _extract(depsgraph, selected_only)
+        return _extract(depsgraph, selected_only, world)
 
 
-def _extract(depsgraph, selected_only):
+def _extract(depsgraph, selected_only, world):
     scene = depsgraph.scene_eval
     view_layer = depsgraph.view_layer
     scale = float(scene.unit_settings.scale_length) or 1.0
@@ -364,7 +367,7 @@ def _extract(depsgraph, selected_only):
     if out.instances:
         out.notes.append(f"{out.instances} instance(s) light and shadow the scene but receive no "
                          "colours (they share their source's mesh)")
-    world_radiance, world_sun, world_note = read_world(scene)
+    world_radiance, world_sun, world_note = read_world(scene) if world else (None, None, None)
     if world_note:
         out.notes.append(world_note)
     if world_sun is not None:

@@ -90,7 +90,8 @@ def prepare(context, options):
         raise BakeError(f"Invalid bake setting: {exc}") from exc
     depsgraph = context.evaluated_depsgraph_get()
     try:
-        ext = extract(depsgraph, selected_only=options["selected_only"])
+        ext = extract(depsgraph, selected_only=options["selected_only"],
+                      world=settings.sky == "world")
     except RadiosityError as exc:        # a light core.make_lights refuses (negative power)
         raise BakeError(str(exc)) from exc
     if not ext.parts:

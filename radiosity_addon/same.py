@@ -128,7 +128,8 @@ def read(context, entry):
     Lights or None), their factor from the kept ones (:func:`lights_factor`: (3,) or None));
     RelightError if anything else changed."""
     try:
-        ext = extract(context.evaluated_depsgraph_get(), selected_only=entry.selected_only)
+        ext = extract(context.evaluated_depsgraph_get(), selected_only=entry.selected_only,
+                      world=entry.bake_input.settings.sky == "world")
     except RadiosityError as exc:
         raise RelightError(str(exc)) from exc
     old = entry.bake_input.extraction.arrays

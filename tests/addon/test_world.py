@@ -204,3 +204,71 @@ def test_floor_and_wall_under_blenders_sky_texture_match_cycles(package):
     # The rendering left nothing behind in the file.
     assert [s.name for s in bpy.data.scenes] == [bpy.context.scene.name]
     assert "Radiosity world map" not in bpy.data.cameras
+
+
+def _cie_world(zenith):
+    """Cycles' own CIE overcast sky, built from nodes: the world's Background strength
+    ``Lz (1 + 2 z) / 3`` above the horizon and 0 below it, z the direction's height (the
+    Texture Coordinate node's Generated output is the ray's direction in a world)."""
+    world = _world((1.0, 1.0, 1.0))
+    nt = world.node_tree
+    coords, xyz = nt.nodes.new("ShaderNodeTexCoord"), nt.nodes.new("ShaderNodeSeparateXYZ")
+    shape, above, value = (nt.nodes.new("ShaderNodeMath") for _ in range(3))
+    shape.operation, above.operation, value.operation = "MULTIPLY_ADD", "GREATER_THAN", "MULTIPLY"
+    shape.inputs[1].default_value, shape.inputs[2].default_value = 2.0, 1.0    # 1 + 2 z
+    above.inputs[1].default_value = 0.0
+    nt.links.new(coords.outputs["Generated"], xyz.inputs[0])
+    nt.links.new(xyz.outputs["Z"], shape.inputs[0])
+    nt.links.new(xyz.outputs["Z"], above.inputs[0])
+    nt.links.new(shape.outputs[0], value.inputs[0])
+    nt.links.new(above.outputs[0], value.inputs[1])
+    scaled = nt.nodes.new("ShaderNodeMath")
+    scaled.operation = "MULTIPLY"
+    scaled.inputs[1].default_value = zenith / 3.0
+    nt.links.new(value.outputs[0], scaled.inputs[0])
+    nt.links.new(scaled.outputs[0], nt.nodes["Background"].inputs["Strength"])
+    return world
+
+
+def test_floor_and_wall_under_the_cie_overcast_sky_match_cycles(package):
+    """sky='cie_overcast' (core.sky.CIEOvercast, gathered per direction through the
+    hemicube's empty pixels) against Cycles' bake under the same sky made of world nodes:
+    corner by corner (luminance), the uniform world's tolerances (the same hemicube edge
+    effect at the wall's foot)."""
+    floor = _grid("Floor", 2.0, (0.0, 0.0, 0.0))
+    wall = _grid("Wall", 2.0, (0.0, 1.0, 1.0), rotation=(np.pi / 2, 0.0, 0.0))   # normal -y
+    scene = bpy.context.scene
+    zenith = package.core.sky.zenith_radiance(10_000.0)
+    _cie_world(zenith)
+    cycles = _cycles([floor, wall])
+    scene.radiosity.sky = "CIE_OVERCAST"
+    ours, report = _ours([floor, wall])
+    assert report["sky"]["kind"] == "cie_overcast"
+    c, o = np.concatenate(cycles), np.concatenate(ours)
+    lum_c, lum_o = c @ [0.2126, 0.7152, 0.0722], o @ [0.2126, 0.7152, 0.0722]
+    rel = np.abs(lum_o - lum_c) / lum_c
+    msg = f"mean {rel.mean():.4f}, max {rel.max():.4f}, ours/Cycles {lum_o.sum() / lum_c.sum():.4f}"
+    print(msg)
+    assert rel.mean() < MEAN_RTOL, msg
+    assert rel.max() < MAX_RTOL, msg
+    # The open floor far from the wall sees nearly the whole sky: rho x (the sky's horizontal
+    # irradiance / pi), the closed form 7 pi Lz / 9 / pi, less the wall's share.
+    assert lum_o.max() < 0.5 * 7.0 * zenith / 9.0 * (1 + 1e-3)
+
+
+def test_the_cie_overcast_sky_replaces_the_whole_world_its_sun_disc_too(package):
+    """sky='cie_overcast' replaces the world, so a Sky Texture world with its sun disc adds no
+    sun light (an overcast sky has none) and is not even rendered: the bake equals the same
+    bake with no world at all (the same scene in two equivalent forms)."""
+    floor = _grid("Floor", 2.0, (0.0, 0.0, 0.0), cuts=4)
+    wall = _grid("Wall", 2.0, (0.0, 1.0, 1.0), rotation=(np.pi / 2, 0.0, 0.0), cuts=4)
+    scene = bpy.context.scene
+    scene.radiosity.sky = "CIE_OVERCAST"
+    scene.world = None
+    bare, _ = _ours([floor, wall])
+    _sky_texture_world(np.radians(40.0), np.radians(200.0))
+    ours, report = _ours([floor, wall])
+    assert not report.get("lights", {}).get("names"), report.get("lights")
+    assert not any("map rendered by Cycles" in n for n in report["notes"])
+    for a, b in zip(ours, bare):
+        np.testing.assert_array_equal(a, b)
