@@ -7,8 +7,9 @@ Relight after reopening the file reads it back (:func:`load`) when nothing is ke
 The batch writes it beside its output (``--save-relight``) and relights a baked file from it
 (``--relight``).
 
-The file: a line of JSON (format, the add-on's version, per scene its baked objects' mesh
-fingerprints) and then a pickle of each scene's :class:`relight.Kept`. Reading checks the
+The file: a line of JSON (its format and version, the package name it was written from, per
+scene its baked objects' mesh fingerprints) and then a pickle of each scene's
+:class:`relight.Kept`. Reading checks the
 fingerprints against the objects first, so a file left from another bake of this .blend is
 refused before anything is read; the Relight itself then compares the scene with the kept bake
 as in the session (``same.read``). The pickle is read by an unpickler that admits only the
@@ -33,7 +34,8 @@ SUFFIX = ".radiosity"
 MAGIC = "radiosity-kept"
 FORMAT = 1
 
-#: The package these modules run in (``radiosity_baker``, ``bl_ext.user_default.radiosity_baker``)
+#: The package these modules run in (``radiosity_baker``; installed:
+#: ``bl_ext.user_default.radiosity_baker``).
 ROOT = __name__.rsplit(".", 2)[0]
 
 #: Globals outside the add-on that kept bakes hold: NumPy's arrays and dtypes, plain containers.
