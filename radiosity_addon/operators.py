@@ -18,10 +18,23 @@ from .write import clear_bake
 TIMER_INTERVAL = 0.1
 
 
+def lossy_text(report):
+    """Existing Vertices: how much the light varies inside the user's faces, from the report's
+    ``face_variation`` (core.criteria.face_variation); '' when it varies in none."""
+    varying = report.get("face_variation")
+    if not isinstance(varying, dict) or not varying.get("faces_varying"):
+        return ""
+    share = 100.0 * float(varying.get("area_share_varying", 0.0))
+    return (f"Lossy: the light varies inside {varying['faces_varying']} faces ({share:.0f} % of "
+            f"the area); Output > Radiosity Mesh shows it")
+
+
 def _summary_line(report):
+    lossy = lossy_text(report)
     return (f"Radiosity baked: {report.get('patches', '?')} patches, "
             f"{report.get('iterations', '?')} iterations, "
-            f"{report.get('timings', {}).get('total', 0.0):.2f} s")
+            f"{report.get('timings', {}).get('total', 0.0):.2f} s" + (f". {lossy}" if lossy
+                                                                    else ""))
 
 
 def panel_job(context, bake_input):

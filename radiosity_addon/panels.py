@@ -11,6 +11,7 @@ import json
 import bpy
 
 from . import relight_ops
+from .operators import lossy_text
 from .extract import ATTRIBUTE, LUX_ATTRIBUTE
 
 #: Stage timings of the report, in the order a user reads them, with their labels (total first).
@@ -202,6 +203,9 @@ def summary_lines(text):
         verts = sum(o.get("output_vertices", 0) for o in written)
         faces = sum(o.get("output_faces", 0) for o in written)
         lines.append((f"Mesh: {faces_in} faces -> {faces} ({verts} vertices)", "NONE"))
+    lossy = lossy_text(report)
+    if lossy:            # Existing Vertices: what one colour per modelled corner cannot show
+        lines.append((lossy, "INFO"))
     known = dict(STAGE_LABELS)
     for key, label in STAGE_LABELS[1:]:
         if key in timings:

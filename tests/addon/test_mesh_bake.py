@@ -134,3 +134,30 @@ def test_a_bake_from_the_extension_shares_its_hemicubes_with_plain_python_worker
     assert len(alone) == len(shared) == 2
     assert all(np.array_equal(a, b) for a, b in zip(alone, shared))
     parallel.close()
+
+
+def test_existing_vertices_says_in_last_bake_when_it_is_lossy(package):
+    """Issue 9: with Existing Vertices the report says how much the light varies inside the
+    user's faces, so the user sees when one colour per modelled corner loses it. A one-quad
+    floor under a small lamp (its light falls off across the face): Last Bake and the bake's
+    message say so; the radiosity mesh, which shows it, says nothing of the kind."""
+    from helpers import square
+    mesh_object("Floor", *square(4.0), material("grey", (0.5, 0.5, 0.5)))
+    mesh_object("Lamp", *square(0.5, z=1.0, down=True),
+                material("lamp", emission=(1.0, 1.0, 1.0), strength=10.0, kind="emission"))
+    scene = bpy.context.scene
+    panels, operators = PACKAGE.radiosity_addon.panels, PACKAGE.radiosity_addon.operators
+    for mode, lossy in (("VERTICES", True), ("MESH", False)):
+        set_settings(scene, output_mode=mode)
+        assert bpy.ops.radiosity.bake() == {"FINISHED"}
+        report = json.loads(scene.radiosity.last_report)
+        lines = [t for t, _ in panels.summary_lines(scene.radiosity.last_report)]
+        said = [t for t in lines if t.startswith("Lossy")]
+        if lossy:
+            varying = report["face_variation"]
+            assert varying["faces_varying"] == 1 and varying["area_share_varying"] == 1.0
+            assert said == ["Lossy: the light varies inside 1 faces (100 % of the area); "
+                            "Output > Radiosity Mesh shows it"]
+            assert operators._summary_line(report).endswith(said[0])
+        else:
+            assert said == [] and "face_variation" not in report
