@@ -185,9 +185,11 @@ def run(case, args):
     arrays["object_names"] = tuple("%03d_%s" % (i, n) for i, n in enumerate(arrays["object_names"]))
     scene = make_scene(**arrays, lights=CASES[case] or None, world=world)
     names = [str(n) for n in arrays["object_names"]]
-    for n in [None] + list(args.light_samples):
-        kw = {} if n is None else dict(light_samples=n)
-        label = "ours (defaults)" if n is None else "ours (light_samples %d)" % n
+    runs = [("ours (defaults)", "", {})]
+    runs += [("ours (light_samples %d)" % n, n, dict(light_samples=n)) for n in args.light_samples]
+    runs += [("ours (no shadow cuts)", "", dict(shadow_cuts=False))] if args.no_shadow_cuts else []
+    runs += [("ours (contrast %g)" % c, "", dict(contrast=c)) for c in args.contrasts]
+    for label, n, kw in runs:
         res, wall, cpu = coarse.timed_bake(scene, output_mode="mesh", **kw)
         m = res.output
         group = coarse.groups_of(dict(object_names=names, face_objects=scene.face_objects[
@@ -195,7 +197,7 @@ def run(case, args):
         colours, misses = ref.sample(m.vertices, m.corner_verts, m.face_starts, m.face_sizes,
                                      group, m.corner_colours)
         err, fv = ref.measure(colours)
-        rows.append(dict(case=case, method=label, samples="" if n is None else n,
+        rows.append(dict(case=case, method=label, samples=n,
                          vertices=len(m.vertices), t_total=wall, cpu=cpu, misses=misses, **err))
         print("%s: %s %.2f %% (bias %+.2f %%, without the worst %d faces %.2f %%), %d vertices, "
               "%.1f s; reference noise %.2f %%" % (case, label, 100 * err["rms"],
@@ -229,6 +231,10 @@ def main(argv=None):
     ap.add_argument("--cycles-samples", type=int, nargs="*", default=[16, 64])
     ap.add_argument("--light-samples", type=int, nargs="*", default=[],
                     help="also bake with these light_samples (shadow rays in penumbrae)")
+    ap.add_argument("--no-shadow-cuts", action="store_true",
+                    help="also bake with shadow_cuts off (the shadow lines at objects' feet)")
+    ap.add_argument("--contrasts", type=float, nargs="*", default=[],
+                    help="also bake with these contrasts (the radiosity mesh's refinement)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--cache", default=str(ROOT / "bench" / "results" / "cache"))
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "lights.csv"))
