@@ -9,10 +9,9 @@ The batch writes it beside its output (``--save-relight``) and relights a baked 
 
 The file: a line of JSON (its format and version, the package name it was written from, per
 scene its baked objects' mesh fingerprints) and then a pickle of each scene's
-:class:`relight.Kept`. Reading checks the
-fingerprints against the objects first, so a file left from another bake of this .blend is
-refused before anything is read; the Relight itself then compares the scene with the kept bake
-as in the session (``same.read``). The pickle is read by an unpickler that admits only the
+:class:`relight.Kept`. Reading checks the fingerprints against the objects first, so a file
+left from another bake of this .blend is refused before anything is read; the Relight itself
+then compares the scene with the kept bake as in the session (``same.read``). The pickle is read by an unpickler that admits only the
 add-on's own classes and NumPy's arrays and dtypes, not arbitrary callables; still, read only
 files you made.
 """

@@ -97,12 +97,12 @@ def kept_or_file(scene, path=None):
     from then on; None when neither. Raises kept_file.KeptFileError when the file is not this
     scene's bake."""
     entry = kept(scene)
+    if entry is not None:
+        return entry
     if path is None:
         path = bpy.data.filepath and kept_file.beside(bpy.data.filepath)
         if not path or not os.path.isfile(path):
-            return entry
-    if entry is not None:
-        return entry
+            return None
     entry = kept_file.load(path, scene)
     _KEPT[scene.session_uid] = entry
     _TOO_BIG.pop(scene.session_uid, None)
