@@ -11,9 +11,9 @@ The file: a line of JSON (its format and version, the package name it was writte
 scene its baked objects' mesh fingerprints) and then a pickle of each scene's
 :class:`relight.Kept`. Reading checks the fingerprints against the objects first, so a file
 left from another bake of this .blend is refused before anything is read; the Relight itself
-then compares the scene with the kept bake as in the session (``same.read``). The pickle is read by an unpickler that admits only the
-add-on's own classes and NumPy's arrays and dtypes, not arbitrary callables; still, read only
-files you made.
+then compares the scene with the kept bake as in the session (``same.read``). The pickle is
+read by an unpickler that admits only the add-on's own classes and NumPy's arrays and dtypes,
+not arbitrary callables; still, read only files you made.
 """
 
 import hashlib
@@ -170,6 +170,9 @@ def load(path, scene):
                                     f"'{scene.name}'; bake again")
             _check(path, scene, prints[scene.name])
             state = _Unpickler(fh, header.get("root") or ROOT).load()
+    except FileNotFoundError:
+        raise KeptFileError(f"no kept bake file at {path} (Save Relight Data in the panel, or "
+                            f"the batch's --save-relight, writes one)") from None
     except OSError as exc:
         raise KeptFileError(f"Relight data {path}: cannot read it ({exc.strerror or exc})") \
             from None
@@ -223,9 +226,6 @@ def relight_from(context, path):
     """The batch's --relight: the scene's kept bake read from ``path`` and relit with the light
     the scene holds now; (report, the kept bake's job.BakeInput). Raises RelightError."""
     from .relight import kept_or_file, relight
-    if not os.path.isfile(path):
-        raise KeptFileError(f"no kept bake file at {path} (write one with --save-relight, or "
-                            f"Save Relight Data in the panel)")
     entry = kept_or_file(context.scene, path)
     return relight(context), entry.bake_input
 
@@ -233,11 +233,11 @@ def relight_from(context, path):
 def save_scene(scene, blend_path):
     """The batch's --save-relight: the scene's kept bake beside the .blend saved at
     ``blend_path``; (its path, bytes). Raises KeptFileError when no bake is kept."""
-    from .relight import _TOO_BIG, kept
+    from .relight import kept, not_kept_reason
     entry = kept(scene)
     if entry is None:
-        mb, budget = _TOO_BIG.get(scene.session_uid, (0.0, 0.0))
-        raise KeptFileError(f"the bake was not kept for Relight (it needs {mb:.0f} MB, above "
-                            f"the Memory Budget of {budget:.0f} MB); raise --memory-budget")
+        reason = not_kept_reason(scene)
+        raise KeptFileError(f"the bake was not kept for Relight ({reason}); raise --memory-budget"
+                            if reason else "no bake of this scene is kept for Relight")
     path = beside(blend_path)
     return path, save(path, {scene: entry})

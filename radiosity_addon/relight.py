@@ -111,6 +111,21 @@ def kept_or_file(scene, path=None):
     return entry
 
 
+def not_kept_sizes(scene):
+    """(MB the scene's last bake would have kept, the memory budget in MB) when it was not
+    kept for being too big, else None."""
+    return _TOO_BIG.get(scene.session_uid)
+
+
+def not_kept_reason(scene):
+    """Why the scene's last bake was not kept ("it needs N MB, above the Memory Budget of M
+    MB"), or None when nothing was left out."""
+    big = not_kept_sizes(scene)
+    if big is None:
+        return None
+    return f"it needs {big[0]:.0f} MB, above the Memory Budget of {big[1]:.0f} MB"
+
+
 def keep(scene, bake_input, result, ready=None):
     """Keep a bake for relight and list its light groups on the scene (after job.apply).
     ``ready``: the Kept that :func:`prepared` made of this bake in its worker, if any."""
@@ -341,10 +356,9 @@ def begin(context):
     scene = context.scene
     entry = kept_or_file(scene)
     if entry is None:
-        big = _TOO_BIG.get(scene.session_uid)
-        if big is not None:
-            raise RelightError(f"Relight: the last bake was not kept in memory (it needs "
-                               f"{big[0]:.0f} MB, above the Memory Budget of {big[1]:.0f} MB); "
+        reason = not_kept_reason(scene)
+        if reason is not None:
+            raise RelightError(f"Relight: the last bake was not kept in memory ({reason}); "
                                f"{BAKE_AGAIN}")
         raise RelightError(f"Relight: no bake is kept in memory for this scene (the .blend "
                            f"holds none; Save Relight Data writes it beside the file); "

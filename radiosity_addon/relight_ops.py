@@ -229,6 +229,9 @@ def draw(layout, scene):
     row = layout.row(align=True)
     row.operator("radiosity.relight", icon="LIGHT")
     if entry is None:
+        hint = not_kept_hint(scene)
+        if hint:
+            layout.label(text=hint, icon="INFO")
         return
     row.operator("radiosity.relight_forget", text=f"{entry.kept_mb:.0f} MB", icon="X")
     groups = scene.radiosity_groups
@@ -244,6 +247,19 @@ def draw(layout, scene):
     error = _ERRORS.get(scene.session_uid)
     if error:
         layout.label(text=error, icon="ERROR")
+
+
+def not_kept_hint(scene):
+    """What the panel says under Relight when no bake is kept in memory: why the last one was
+    not kept, or that a kept bake file beside the .blend will be read (after reopening it);
+    None when neither."""
+    big = relight.not_kept_sizes(scene)         # short: the sidebar is narrow
+    if big:
+        return f"Not kept: needs {big[0]:.0f} MB (budget {big[1]:.0f})"
+    path = bpy.data.filepath and kept_file.beside(bpy.data.filepath)
+    if path and os.path.isfile(path):
+        return f"Relight reads {os.path.basename(path)}"
+    return None
 
 
 @persistent

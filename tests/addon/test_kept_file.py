@@ -34,6 +34,14 @@ def _reopen(path):
     assert relight.kept(bpy.context.scene) is None        # nothing in memory after a load
 
 
+def _hints():
+    """The INFO lines the panel's Relight section draws."""
+    from test_operator import _Layout
+    log = []
+    PACKAGE.radiosity_addon.relight_ops.draw(_Layout(log), bpy.context.scene)
+    return [k["text"] for kind, _, k in log if kind == "label" and k.get("icon") == "INFO"]
+
+
 def _relit(power):
     bpy.data.objects["Bulb"].data.energy = power
     assert bpy.ops.radiosity.relight() == {"FINISHED"}
@@ -50,8 +58,12 @@ def test_relight_after_reopening_reads_the_kept_bake_saved_beside_the_file(packa
     size = side.stat().st_size
     assert size > 0.5 * relight.kept(bpy.context.scene).kept_mb * 2 ** 20
     expected = _relit(90.0)                     # in this session, on the bake in memory
+    assert _hints() == []                       # kept in memory: the light groups show
     _reopen(blend)
+    # Before the first Relight reads it, the panel says a file will be read.
+    assert _hints() == ["Relight reads room.radiosity"]
     got = _relit(90.0)                          # after reopening: read back from the file
+    assert _hints() == []
     assert relight.kept(bpy.context.scene) is not None
     report = bpy.context.scene.radiosity.last_report
     assert '"relight"' in report

@@ -9,6 +9,7 @@ bake places them where *its* light changes, a relight keeps the bake's (core.rel
 
 import json
 import os
+import re
 import tempfile
 
 import bpy
@@ -365,6 +366,12 @@ def test_a_bake_whose_kept_data_exceeds_the_memory_budget_is_not_kept(package, m
     with pytest.raises(RuntimeError, match=r"not kept in memory \(it needs \d+ MB, above the "
                                            r"Memory Budget of 1 MB\); bake again"):
         bpy.ops.radiosity.relight()
+    from test_operator import _Layout                   # the panel says so under the button
+    log = []
+    PACKAGE.radiosity_addon.relight_ops.draw(_Layout(log), bpy.context.scene)
+    labels = [k["text"] for kind, _, k in log if kind == "label"]
+    assert len(labels) == 1 and re.fullmatch(r"Not kept: needs \d+ MB \(budget 1\)",
+                                              labels[0]), labels
     monkeypatch.undo()
     bake(output_mode="MESH", element_levels=2)           # the default budget keeps it again
     assert relight.kept(bpy.context.scene) is not None

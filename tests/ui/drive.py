@@ -332,6 +332,9 @@ def scenario():
         else None
     before = colours()
     relight.drop(bpy.context.scene)
+    redraw()                                   # the panel says the file beside will be read
+    yield 1.0
+    screenshot("relight_hint.png")
     with bpy.context.temp_override(window=window, area=area, region=ui):
         results["relight_from_file"] = sorted(bpy.ops.radiosity.relight("INVOKE_DEFAULT"))
     t0 = time.perf_counter()

@@ -207,7 +207,8 @@ def test_saving_the_file_keeps_the_bake_beside_it_and_relight_reads_it_back(sess
 
 @pytest.mark.parametrize("name", ["before_bake.png", "during_bake.png", "after_bake.png",
                                   "advanced_open.png", "light_panel.png", "lux_view.png",
-                                  "after_relight.png", "during_relight.png"])
+                                  "after_relight.png", "during_relight.png",
+                                  "relight_hint.png"])
 def test_screenshot_is_not_blank(session, name):
     from PIL import Image
 
