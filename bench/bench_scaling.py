@@ -15,6 +15,8 @@ The three bakes of a size run back to back and their outputs are compared bit fo
 Run: ``.venv/bin/python bench/bench_scaling.py [--sizes 1:2000 2:5000 ...] [--modes 1 2 dask]``.
 Prints a line per bake, writes ``bench/results/scaling.csv`` and the log-log chart
 ``bench/results/scaling.png`` (time per stage and peak memory against output vertices).
+``--from-csv A.csv B.csv`` writes them from earlier runs' rows instead (a size or a mode run
+apart), with no bake.
 """
 
 import argparse
@@ -135,11 +137,18 @@ def main():
                         choices=["1", "2", "dask"])
     parser.add_argument("--out", default=os.path.join(RESULTS, "scaling"),
                         help="CSV and PNG path without extension")
+    parser.add_argument("--from-csv", nargs="+", metavar="CSV",
+                        help="no bakes: write --out's CSV and chart from the rows of these "
+                             "(runs of some sizes or modes each)")
     parser.add_argument("--one", nargs=3, metavar=("ROOMS", "BUDGET", "MODE"),
                         help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.one:
         print(json.dumps(one_bake(int(args.one[0]), int(args.one[1]), args.one[2])))
+        return
+    if args.from_csv:
+        write(sorted((r for path in args.from_csv for r in read_csv(path)),
+                     key=lambda r: (r["vertices"], r["mode"])), args.out)
         return
     print(f"{'rooms':>5} {'mode':>5} {'patches':>7} {'vertices':>8} {'total s':>8} "
           + " ".join(f"{s[:9]:>9}" for s in STAGES)
@@ -164,8 +173,13 @@ def main():
         print(f"      rooms {rooms}: " + ", ".join(f"{base / runs[m]['seconds']:.2f}x ({m})"
                                                    for m in args.modes[1:])
               + f"; outputs bit-identical: {len(set(digests.values())) == 1}", flush=True)
-    os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
-    with open(args.out + ".csv", "w", newline="") as f:
+    write(rows, args.out)
+
+
+def write(rows, out):
+    """``out``.csv and ``out``.png of bake rows (one_bake's dicts)."""
+    os.makedirs(os.path.dirname(out) or ".", exist_ok=True)
+    with open(out + ".csv", "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["rooms", "mode", "patches", "vertices", "faces", "seconds", *STAGES, "cpu",
                     "workers_cpu", "peak_mb", "workers_peak_mb", "digest"])
@@ -174,8 +188,29 @@ def main():
                         f"{r['seconds']:.2f}", *(f"{r['stages'].get(s, 0.0):.2f}" for s in STAGES),
                         f"{r['cpu']:.1f}", f"{r['workers_cpu']:.1f}", f"{r['peak_mb']:.0f}",
                         f"{r['workers_peak_mb']:.0f}", r["digest"][:16]])
-    chart(rows, args.out + ".png")
-    print(f"wrote {args.out}.csv and {args.out}.png")
+    chart(rows, out + ".png")
+    print(f"wrote {out}.csv and {out}.png")
+
+
+def read_csv(path):
+    """The rows of a CSV that :func:`write` wrote, as one_bake's dicts."""
+    with open(path, newline="") as f:
+        reader = csv.reader(f)
+        head = next(reader)
+        rows = []
+        for line in reader:
+            cells = dict(zip(head[:6], line[:6]))
+            stages = dict(zip(STAGES, map(float, line[6:6 + len(STAGES)])))
+            tail = dict(zip(head[6 + len(STAGES):], line[6 + len(STAGES):]))
+            rows.append(dict(rooms=int(cells["rooms"]), mode=cells["mode"],
+                             patches=int(cells["patches"]), vertices=int(cells["vertices"]),
+                             faces=int(cells["faces"]), seconds=float(cells["seconds"]),
+                             stages=stages, cpu=float(tail["cpu"]),
+                             workers_cpu=float(tail["workers_cpu"]),
+                             peak_mb=float(tail["peak_mb"]),
+                             workers_peak_mb=float(tail["workers_peak_mb"]),
+                             digest=tail["digest"]))
+    return rows
 
 
 if __name__ == "__main__":

@@ -35,7 +35,10 @@ from .rows import RowStore, compact_rows
 #: (Jacobi, on the kept rows): their one-bounce gather from the solved patches reads the coarse
 #: patches' means, which next to a concave corner are much brighter than the light there (the
 #: light dips steeply into a room's corner). Coarse Cornell box, the ceiling element at a top
-#: corner: 0.157 from the patches, 0.131 / 0.125 / 0.123 / 0.123 over four sweeps.
+#: corner: 0.157 from the patches, 0.131 / 0.125 / 0.123 / 0.123 over four sweeps. Its cost
+#: grows with furniture: in bench/bench_scaling.py's rooms 75 % of the gathered elements are
+#: near, each such hemicube draws the whole room, and a bake takes twice as long (README,
+#: "Scaling, measured again on 2026-12-07").
 NEAR_SWEEPS = 3
 
 
