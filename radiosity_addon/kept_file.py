@@ -62,6 +62,13 @@ def beside(blend_path):
     return os.path.splitext(blend_path)[0] + SUFFIX
 
 
+def beside_blend(blend_path):
+    """The kept bake file beside the .blend at ``blend_path`` when one is there; None when the
+    .blend is unsaved (``""``) or has none beside it."""
+    path = blend_path and beside(blend_path)
+    return path if path and os.path.isfile(path) else None
+
+
 def fingerprint(scene, names):
     """{object name: [vertex count, corner count, SHA-1 of its vertex coordinates and of its
     baked colours] or None (no such mesh object)} of the objects ``names`` (a kept bake's)."""

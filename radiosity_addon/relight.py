@@ -40,7 +40,6 @@ panel's bake.
 """
 
 import json
-import os
 import time
 import traceback
 from contextlib import contextmanager
@@ -100,8 +99,8 @@ def kept_or_file(scene, path=None):
     if entry is not None:
         return entry
     if path is None:
-        path = bpy.data.filepath and kept_file.beside(bpy.data.filepath)
-        if not path or not os.path.isfile(path):
+        path = kept_file.beside_blend(bpy.data.filepath)
+        if path is None:
             return None
     entry = kept_file.load(path, scene)
     _KEPT[scene.session_uid] = entry

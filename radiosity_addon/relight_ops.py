@@ -256,8 +256,8 @@ def not_kept_hint(scene):
     big = relight.not_kept_sizes(scene)         # short: the sidebar is narrow
     if big:
         return f"Not kept: needs {big[0]:.0f} MB (budget {big[1]:.0f})"
-    path = bpy.data.filepath and kept_file.beside(bpy.data.filepath)
-    if path and os.path.isfile(path):
+    path = kept_file.beside_blend(bpy.data.filepath)
+    if path is not None:
         return f"Relight reads {os.path.basename(path)}"
     return None
 
@@ -274,7 +274,7 @@ def _save_kept(path="", *_args):
     """The .blend is saved: with Save Relight Data on, or a kept bake file already beside it
     (the two stay one), its scenes' kept bakes go beside it."""
     path = path if isinstance(path, str) and path else bpy.data.filepath
-    there = bool(path) and os.path.isfile(kept_file.beside(path))
+    there = kept_file.beside_blend(path) is not None
     scenes = {}
     for scene in bpy.data.scenes:
         props = getattr(scene, "radiosity", None)

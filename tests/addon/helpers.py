@@ -103,3 +103,27 @@ def set_settings(scene, **kw):
     props = scene.radiosity
     for key, value in kw.items():
         setattr(props, key, value)
+
+
+class Layout:
+    """Records what a panel draws (bpy layouts cannot be made outside a UI redraw)."""
+
+    def __init__(self, log):
+        self.log = log
+
+    def __getattr__(self, name):
+        if name in ("column", "row", "box", "split"):
+            return lambda *a, **k: self
+        if name == "panel_prop":  # a layout panel: header and (unfolded) body
+            return lambda *a, **k: (self, self)
+        if name in ("prop", "operator", "label"):
+            return lambda *a, **k: self.log.append((name, a, k)) or self
+        raise AttributeError(name)
+
+
+def relight_labels(relight_ops, icon=None):
+    """The labels the panel's Relight section draws (only those with ``icon``, when given)."""
+    log = []
+    relight_ops.draw(Layout(log), bpy.context.scene)
+    return [k["text"] for kind, _, k in log
+            if kind == "label" and (icon is None or k.get("icon") == icon)]

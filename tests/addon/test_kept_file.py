@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from conftest import PACKAGE
-from helpers import read_colours
+from helpers import read_colours, relight_labels
 from test_batch import FAST, run_batch
 from test_relight import bake, room
 
@@ -36,10 +36,7 @@ def _reopen(path):
 
 def _hints():
     """The INFO lines the panel's Relight section draws."""
-    from test_operator import _Layout
-    log = []
-    PACKAGE.radiosity_addon.relight_ops.draw(_Layout(log), bpy.context.scene)
-    return [k["text"] for kind, _, k in log if kind == "label" and k.get("icon") == "INFO"]
+    return relight_labels(PACKAGE.radiosity_addon.relight_ops, icon="INFO")
 
 
 def _relit(power):

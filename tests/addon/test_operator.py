@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from conftest import PACKAGE, ROOT
-from helpers import box, material, mesh_object, read_colours, set_settings, square
+from helpers import Layout, box, material, mesh_object, read_colours, set_settings, square
 
 core = PACKAGE.core
 job = PACKAGE.radiosity_addon.job
@@ -589,22 +589,6 @@ def test_panel_properties_are_the_settings_table(package):
             assert got == pytest.approx(want, rel=1e-6), name
 
 
-class _Layout:
-    """Records what a panel draws (bpy layouts cannot be made outside a UI redraw)."""
-
-    def __init__(self, log):
-        self.log = log
-
-    def __getattr__(self, name):
-        if name in ("column", "row", "box", "split"):
-            return lambda *a, **k: self
-        if name == "panel_prop":  # a layout panel: header and (unfolded) body
-            return lambda *a, **k: (self, self)
-        if name in ("prop", "operator", "label"):
-            return lambda *a, **k: self.log.append((name, a, k)) or self
-        raise AttributeError(name)
-
-
 def _draw_panels():
     """Everything the panel and its sub-panels draw: [(kind, args, kwargs)]."""
     log = []
@@ -612,7 +596,7 @@ def _draw_panels():
     for cls in panels.CLASSES:
         if hasattr(cls, "poll") and not cls.poll(bpy.context):
             continue
-        cls.draw(type("P", (), {"layout": _Layout(log)})(), bpy.context)
+        cls.draw(type("P", (), {"layout": Layout(log)})(), bpy.context)
     return log
 
 

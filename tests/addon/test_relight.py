@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from conftest import PACKAGE
-from helpers import box, material, mesh_object, read_colours, set_settings, square
+from helpers import box, material, mesh_object, read_colours, relight_labels, set_settings, square
 
 relight = PACKAGE.radiosity_addon.relight
 write = PACKAGE.radiosity_addon.write
@@ -366,10 +366,7 @@ def test_a_bake_whose_kept_data_exceeds_the_memory_budget_is_not_kept(package, m
     with pytest.raises(RuntimeError, match=r"not kept in memory \(it needs \d+ MB, above the "
                                            r"Memory Budget of 1 MB\); bake again"):
         bpy.ops.radiosity.relight()
-    from test_operator import _Layout                   # the panel says so under the button
-    log = []
-    PACKAGE.radiosity_addon.relight_ops.draw(_Layout(log), bpy.context.scene)
-    labels = [k["text"] for kind, _, k in log if kind == "label"]
+    labels = relight_labels(PACKAGE.radiosity_addon.relight_ops)   # the panel says so
     assert len(labels) == 1 and re.fullmatch(r"Not kept: needs \d+ MB \(budget 1\)",
                                               labels[0]), labels
     monkeypatch.undo()
