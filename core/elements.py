@@ -38,7 +38,10 @@ from .rows import RowStore, compact_rows
 #: corner: 0.157 from the patches, 0.131 / 0.125 / 0.123 / 0.123 over four sweeps. Its cost
 #: grows with furniture: in bench/bench_scaling.py's rooms 75 % of the gathered elements are
 #: near, each such hemicube draws the whole room, and a bake takes twice as long (README,
-#: "Scaling, measured again on 2026-12-07").
+#: "Scaling, measured again on 2026-12-07"). The last round's new near elements are not
+#: gathered over the solved patches first (:attr:`Elements.late`): that gather only started
+#: their sweeps, and the Cornell box's error over 12 seeds is the same without it (1.465 %
+#: against 1.468 %; docs/benchmark.md).
 NEAR_SWEEPS = 3
 
 
@@ -70,13 +73,20 @@ class Elements:
         Their point-to-node form factors, in ``near``'s order, against the columns of
         ``far_field`` (every element, far patches drawn whole).
     far_field : core.farfield.FarField or None
+    late : (K,) bool or None
+        The ``computed`` nodes with no row in :attr:`rows`: the last round's new elements next
+        to another surface, gathered only against the elements (their gather over the solved
+        patches would only start the sweeps); they start from their patch's radiance.
     """
 
+    late = None                      # kept bakes pickled before it: every node gathered first
+
     def __init__(self, patches, parent, computed, rows, levels, direct=None, near=None,
-                 near_rows=None, far_field=None):
+                 near_rows=None, far_field=None, late=None):
         self.patches, self.parent, self.computed = patches, parent, computed
         self.rows, self.levels, self.direct = rows, levels, direct
         self.near, self.near_rows, self.far_field = near, near_rows, far_field
+        self.late = late
 
     def points(self):
         """(K, 3) centres and (K, 3) normals of the ``computed`` nodes, each facing the side it
@@ -89,13 +99,14 @@ class Elements:
     def with_direct(self, direct):
         """These elements with ``direct`` (K, 3) in place of :attr:`direct`."""
         return Elements(self.patches, self.parent, self.computed, self.rows, self.levels, direct,
-                        self.near, self.near_rows, self.far_field)
+                        self.near, self.near_rows, self.far_field, self.late)
 
     def node_radiance(self, scene, node_radiance):
         """Radiance of the elements' 2E nodes from the solved patches' (2P, 3) node radiance.
 
-        Gathered for the ``computed`` nodes, the patch's own side's value for the others; the
-        ``near`` nodes then gathered from the elements, :data:`NEAR_SWEEPS` times.
+        Gathered for the ``computed`` nodes (but :attr:`late`), the patch's own side's value
+        for the others; the ``near`` nodes then gathered from the elements,
+        :data:`NEAR_SWEEPS` times.
         """
         L = np.asarray(node_radiance, dtype=np.float64)
         P = L.shape[0] // 2
@@ -107,8 +118,10 @@ class Elements:
             incident = self.rows.incident(L)
             if self.direct is not None:
                 incident = incident + self.direct
-            node = self.computed
-            out[node] = shade_side(scene, self.patches.material[node % E], node >= E, incident)
+            first = slice(None) if self.late is None else ~self.late
+            node = self.computed[first]
+            out[node] = shade_side(scene, self.patches.material[node % E], node >= E,
+                                   incident[first])
         if self.near is not None and self.near.size:
             node = self.computed[self.near]
             extra = 0.0 if self.direct is None else self.direct[self.near]
@@ -214,6 +227,8 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
         if not mask.any():
             break
         elements, split_parent = subdivide_patches(elements, mask)
+        last = level == rounds - 1 and level == levels      # the near-only round
+        final_near = near_surfaces(elements) if last else None
         remap = _survivors(mask, split_parent)
         remapped = []
         for ids, side, cols, vals, dl in kept:    # per batch of rows, not per element
@@ -226,6 +241,14 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
         new = np.flatnonzero(mask[split_parent])
         steps.append(dict(split=int(mask.sum()), elements=int(parent.size)))
         todo = [(s, new[masks[s][split_parent[new]]]) for s in (0, 1)]
+        if last:
+            # Its new elements next to another surface are gathered against the elements
+            # (_near_rows); a gather over the solved patches would only start their sweeps.
+            for s, t in todo:
+                late = t[final_near[t]]
+                if late.size:
+                    kept.append((late, s, None, None, np.zeros((late.size, 3))))
+            todo = [(s, t[~final_near[t]]) for s, t in todo]
         total = max(sum(t.size for _, t in todo), 1)
         done = 0
         sky = None if direct is None else direct.sky
@@ -260,36 +283,54 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
     store = RowStore(computed.size, 2 * P, half=True)
     start = 0
     for ids, _, cols, vals, _ in kept:
-        store.add_compact(np.arange(start, start + ids.size), cols, vals)
+        if cols is not None:
+            store.add_compact(np.arange(start, start + ids.size), cols, vals)
         start += ids.size
+    late = np.concatenate([np.full(k[0].size, k[2] is None) for k in kept]) if kept else None
     at_centres = None
     if direct is not None:
         at_centres = np.concatenate([k[4] for k in kept]) if kept else np.zeros((0, 3))
-    out = Elements(elements, parent, computed, store, steps, at_centres)
+    out = Elements(elements, parent, computed, store, steps, at_centres,
+                   late=late if late is not None and late.any() else None)
     if near_threshold is not None and computed.size:
         out.far_field = FarField(patches, Seen(elements, np.arange(parent.size)), parent)
         out.near, out.near_rows = _near_rows(out, resolution=resolution, rotate=rotate, rng=rng,
-                                             batch=batch, monitor=monitor, start=rounds / shares)
+                                             batch=batch, monitor=monitor, start=rounds / shares,
+                                             direct=direct)
     return out
 
 
-def _near_rows(el, *, resolution, rotate, rng, batch, monitor, start):
+def _near_rows(el, *, resolution, rotate, rng, batch, monitor, start, direct=None):
     """Positions in ``el.computed`` of its nodes next to another surface (in Z order), and their
     rows against ``el.far_field``'s columns (a RowStore keyed by position in that list);
-    progress from ``start`` to 1."""
+    progress from ``start`` to 1. The :attr:`Elements.late` nodes' :attr:`Elements.direct` is
+    taken here, with these rows' sums (and sky)."""
     centres, normals = el.points()
     near = np.flatnonzero(near_surfaces(el.patches)[el.computed % el.parent.size])
     near = near[spatial_order(centres[near])]
+    late = np.zeros(el.computed.size, dtype=bool) if el.late is None else el.late
+    if np.count_nonzero(late[near]) != np.count_nonzero(late):
+        raise AssertionError("a late element is not next to another surface")
+    sky = None if direct is None else direct.sky
     far_field = el.far_field
     store = RowStore(near.size, far_field.n_cols, half=True)
     jobs = [np.arange(b, min(b + batch, near.size)) for b in range(0, near.size, batch)]
 
     def begin(keys):
-        return far_field.rows(centres[near[keys]], normals[near[keys]], compact=True,
-                              resolution=resolution, rotate=rotate, rng=rng, later=True)
+        light = None if sky is None else np.zeros((keys.size, 3))
+        rows = far_field.rows(centres[near[keys]], normals[near[keys]], compact=True,
+                              resolution=resolution, rotate=rotate, rng=rng, later=True,
+                              sky=sky, sky_out=light)
+        return light, rows
 
-    for keys, job in ahead(jobs, begin):
-        store.add_compact(keys, *job.result())
+    for keys, (light, job) in ahead(jobs, begin):
+        cols, vals, sums = job.result()
+        store.add_compact(keys, cols, vals, sums)
+        at = late[near[keys]]
+        if direct is not None and at.any():
+            pos = near[keys][at]
+            el.direct[pos] = direct.extra(centres[pos], normals[pos], sums[at],
+                                          sky=None if light is None else light[at])
         if monitor is not None:
             monitor.update(start + (1 - start) * (keys[-1] + 1) / near.size,
                            f"elements: {near.size} next to other surfaces, gathered again")
