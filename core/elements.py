@@ -317,10 +317,11 @@ def _near_rows(el, *, resolution, rotate, rng, batch, monitor, start, direct=Non
     jobs = [np.arange(b, min(b + batch, near.size)) for b in range(0, near.size, batch)]
 
     def begin(keys):
-        light = None if sky is None else np.zeros((keys.size, 3))
+        wanted = sky is not None and late[near[keys]].any()     # only the late need the sky
+        light = np.zeros((keys.size, 3)) if wanted else None
         rows = far_field.rows(centres[near[keys]], normals[near[keys]], compact=True,
                               resolution=resolution, rotate=rotate, rng=rng, later=True,
-                              sky=sky, sky_out=light)
+                              sky=sky if wanted else None, sky_out=light)
         return light, rows
 
     for keys, (light, job) in ahead(jobs, begin):
