@@ -209,6 +209,7 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
     kept = []                                      # (element ids, side, cols, vals, direct)
     steps = []
     rounds = levels + (near_threshold is not None and levels > 0)
+    final_near = None                       # near_surfaces of the final elements, when known
     shares = rounds + (near_threshold is not None)         # the last: the near gather again
     for level in range(rounds):
         emitting = [np.any(side_le[s][elements.material] > 0, axis=1) for s in (0, 1)]
@@ -296,21 +297,23 @@ def make_elements(scene, patches, node_radiance, *, levels, threshold, crease_an
         out.far_field = FarField(patches, Seen(elements, np.arange(parent.size)), parent)
         out.near, out.near_rows = _near_rows(out, resolution=resolution, rotate=rotate, rng=rng,
                                              batch=batch, monitor=monitor, start=rounds / shares,
-                                             direct=direct)
+                                             direct=direct, near_mask=final_near)
     return out
 
 
-def _near_rows(el, *, resolution, rotate, rng, batch, monitor, start, direct=None):
+def _near_rows(el, *, resolution, rotate, rng, batch, monitor, start, direct=None,
+               near_mask=None):
     """Positions in ``el.computed`` of its nodes next to another surface (in Z order), and their
     rows against ``el.far_field``'s columns (a RowStore keyed by position in that list);
     progress from ``start`` to 1. The :attr:`Elements.late` nodes' :attr:`Elements.direct` is
-    taken here, with these rows' sums (and sky)."""
+    taken here, with these rows' sums (and sky). ``near_mask``: :func:`near_surfaces` of
+    ``el.patches`` when the caller has it (the last round's)."""
     centres, normals = el.points()
-    near = np.flatnonzero(near_surfaces(el.patches)[el.computed % el.parent.size])
+    if near_mask is None:
+        near_mask = near_surfaces(el.patches)
+    near = np.flatnonzero(near_mask[el.computed % el.parent.size])
     near = near[spatial_order(centres[near])]
     late = np.zeros(el.computed.size, dtype=bool) if el.late is None else el.late
-    if np.count_nonzero(late[near]) != np.count_nonzero(late):
-        raise AssertionError("a late element is not next to another surface")
     sky = None if direct is None else direct.sky
     far_field = el.far_field
     store = RowStore(near.size, far_field.n_cols, half=True)
