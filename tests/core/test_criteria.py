@@ -204,7 +204,8 @@ def _boxes_and_a_slab(seed):
 @pytest.mark.parametrize("seed", range(3))
 def test_near_surfaces_is_its_definition_over_every_pair(seed):
     """Oracle: the docstring's rule over all pairs, one pair at a time (the function prunes
-    pairs by their spheres' boxes; it must not drop one that qualifies)."""
+    pairs by their spheres' boxes, in blocks within outer blocks; it must not drop one that
+    qualifies, whatever the block sizes)."""
     patches = _boxes_and_a_slab(seed)
     radius, _ = patch_extents(patches.corners, patches.centres)
     c, n = patches.centres, patches.normals
@@ -215,9 +216,11 @@ def test_near_surfaces_is_its_definition_over_every_pair(seed):
         apart = (np.abs(d @ n[p]) > COPLANAR * radius[p]) \
             & (np.abs(np.sum(d * n, axis=1)) > COPLANAR * radius)
         want[p] = np.any(overlap & apart)
-    got = near_surfaces(patches, chunk=64)
     assert want.any() and not want.all()
-    assert np.array_equal(got, want)
+    assert c.shape[0] > 64                  # several outer blocks at outer=64 below
+    for chunk, outer in ((64, 64), (16, 64), (7, 40), (None, None)):   # None: the defaults
+        kw = {} if chunk is None else dict(chunk=chunk, outer=outer)
+        assert np.array_equal(near_surfaces(patches, **kw), want), (chunk, outer)
 
 
 @pytest.mark.parametrize("seed", range(3))
