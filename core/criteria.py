@@ -91,7 +91,7 @@ CAVITY_CHUNK = 256
 
 #: Patches per block of :func:`near_surfaces`, and per outer block whose neighbours its blocks
 #: search. The box test is P x P / NEAR_OUTER comparisons and the pair test's blocks are small:
-#: at 11,846 elements of one room of bench.interiors, 460 ms as one level of 256, 225 ms as
+#: at 11,846 elements of one room of bench.interiors, 460-540 ms as one level of 256, 190 ms as
 #: 64 in 1,024 (2026-12-07).
 NEAR_CHUNK = 64
 NEAR_OUTER = 1024
