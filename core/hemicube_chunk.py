@@ -18,7 +18,7 @@ from .constants import tol
 from .geometry import unique_rows
 from .hemicube_delta import flat_delta_form_factors
 from .hemicube_raster import F32, FRAG_SLOTS, LITTLE_ENDIAN, ZBuffer, draw_items, pixel_coords
-from .parallel import share
+from .parallel import remember_cut, share
 from .sky import gathered
 
 #: Work per internal chunk of sources: (source, polygon) pairs and hemicube pixels. Bounded so
@@ -63,6 +63,7 @@ class Geometry:
         g.poly_v = (np.cumsum(used) - 1)[ids]
         g.diag = float(np.linalg.norm(g.verts.max(axis=0) - g.verts.min(axis=0))) or 1.0
         g.plane_n, g.plane_c = self.plane_n[sel], self.plane_c[sel]
+        remember_cut(g, self, sel, g.poly_patch)
         return g
 
 

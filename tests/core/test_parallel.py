@@ -274,3 +274,53 @@ def test_workers_send_the_hit_columns_and_the_rows_come_back_exactly(room_patche
     with parallel.using(2):
         shared = point_rows(room_patches, pts, nrm, resolution=16)
     assert np.array_equal(shared, want)
+
+
+def test_a_cut_geometry_is_sent_as_its_numbers_and_gives_the_same_rows(room_patches,
+                                                                       monkeypatch):
+    """A Geometry cut out of another (a far-field mix: core.farfield.Union) reaches a worker
+    as the cut's numbers when the worker holds the whole, and the worker's cut gives the rows
+    this process computes from its own cut (oracle). More cuts than a worker keeps, and an
+    evicted one asked for again, keep both sides' kept sets in step."""
+    from core.hemicube import draw_polygons
+
+    polys, poly_patch = draw_polygons(room_patches)
+    whole = hemicube_chunk.Geometry(polys, poly_patch, room_patches.normals)
+    P = room_patches.areas.size
+    rng = np.random.default_rng(4)
+    keep = [np.flatnonzero(rng.random(P) < share) for share in (0.9, 0.7, 0.8, 0.6, 0.95, 0.75)]
+    cuts = []
+    for items in keep:
+        local = np.full(P, -1)
+        local[items] = np.arange(items.size)
+        sel = np.flatnonzero(local[poly_patch] >= 0)
+        cuts.append((whole.cut(sel, local[poly_patch[sel]]), items.size))
+    order = [0, 1, 2, 3, 4, 5, 0, 3, 5]      # 0 and 3 are dropped by then, 5 is not
+    assert parallel.KEPT_GEOMETRIES < len(keep)
+    pts, _ = _floor_points(48, seed=7)
+    eyes = pts + [0.0, 0.0, 1e-3]
+    frames = np.broadcast_to(np.eye(3), (eyes.shape[0], 3, 3)).copy()
+
+    def rows(k):
+        geometry, n = cuts[k]
+        out = np.zeros((eyes.shape[0], 2 * n))
+        hemicube_chunk.rows_in_chunks(hemicube_chunk.Scene(geometry, n, 32, False), eyes,
+                                      frames, out, None)
+        return out
+
+    want = [rows(k) for k in order]
+    assert all(w.any() for w in want)
+    sent = []
+    send = parallel._Worker.send
+
+    def recording(self, message):
+        sent.append(message[0])
+        send(self, message)
+
+    monkeypatch.setattr(parallel._Worker, "send", recording)
+    with parallel.using(2) as stats:
+        got = [rows(k) for k in order]
+    assert stats["problem"] is None and stats["calls"] == len(order)
+    assert sent.count("geometry") == 2              # the whole, once to each worker
+    assert sent.count("cut") == 2 * 8               # cuts 0 and 3 twice, 5 once
+    assert all(np.array_equal(g, w) for g, w in zip(got, want))
