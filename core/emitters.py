@@ -53,16 +53,22 @@ MAX_FACES = 64
 #: "Why that furnace fails").
 MAX_AREA_SHARE = 0.1
 
-#: 'auto' lights exactly the emitters narrower than this many hemicube pixels seen across the
-#: scene: a 1 cm^2 lamp in a 4 m room (0.16 px at R = 64) is missed by most gathers. Wider
-#: lamps alias: 2.95 m over a floor in a 4 m room (bench.stability.scenes.emitter_room), the
-#: hemicube's mean error at the floor's vertices is 7.8 % at 0.3 m (4.8 px; worst vertex 52 %),
-#: 2.7 % at 0.6 m (9.6 px), 1.0 % at 1 m (16 px), where the exact light reads 0.005 %; in lit
-#: rooms the interreflection averages it out. At 16 px (tried 2026-12-05, which takes all three
-#: samples' lamps) the Cornell box read 1.31 -> 1.18 %, the office 2.65 -> 2.58 % but took
-#: 44 -> 56 s, the apartment 3.06 -> 3.12 % and 86 -> 121 s, and the office furnace of
+#: 'auto' lights exactly the emitters narrower than this many hemicube pixels, seen from the
+#: surfaces they light: a pixel at the hemicube's centre spans 2/R radians, and a lamp of width
+#: w at the typical distance d of what it faces (:func:`lamp_reach`) spans w/d, so it covers
+#: w R / (2 d) pixels. A 1 cm^2 lamp 2.95 m over a floor (0.1 px at R = 64) is missed by most
+#: gathers; wider ones alias: in a black 4 m room (bench.stability.scenes.emitter_room) the
+#: hemicube's mean error at the floor's vertices is 7.8 % at 0.3 m (3.3 px; worst vertex 52 %),
+#: 2.7 % at 0.6 m (6.5 px), 1.0 % at 1 m (10.8 px), where the exact light reads 0.005 %; in lit
+#: rooms the interreflection averages it out. Taking every lamp of the three samples (tried
+#: 2026-12-05) read the Cornell box 1.31 -> 1.18 %, the office 2.65 -> 2.58 % but took 44 ->
+#: 56 s, the apartment 3.06 -> 3.12 % and 86 -> 121 s, and the office furnace of
 #: tests/core/test_stability.py read up to 1.1 % high (patches beside its 0.6 m panel, whose
 #: rows disagree with their exact light: README, "Why that furnace fails"): so 2.
+#: Until 2026-12-07 the width was measured against the scene's largest extent instead of d:
+#: the same 0.6 m panel over the same floor was then lit by the hemicube in a suite of 1 to 3
+#: rooms (bench.interiors; 6.4 to 2.1 px) and exactly in 6 and 12 (1.0 and 0.5 px), which
+#: made the 30,000-vertex bake's lights stage 0.8 s -> 19 s.
 AUTO_PIXELS = 2.0
 
 #: Shadow rays per (point, emitter) in the first round, cast where the anchor's or a rim ray
@@ -143,19 +149,23 @@ def exact_materials(scene, mode="all", resolution=64):
     """(M,) bool: the emissive materials whose faces are lit exactly (see the module doc).
 
     ``mode``: 'all', 'off', or 'auto': only materials whose every face is narrower than
-    ``AUTO_PIXELS`` pixels of a hemicube of ``resolution`` seen across the scene (width =
-    area / longest edge, against the scene's largest extent).
+    ``AUTO_PIXELS`` pixels of a hemicube of ``resolution`` seen from what the face's lamp
+    lights (width w = area / longest extent of the lamp, :func:`lamp_widths`, at the distance
+    d of :func:`lamp_reach`: w R / (2 d) pixels). Materials with more than ``MAX_FACES`` faces
+    are not judged: none of them is taken.
     """
     emissive = scene.emissive_materials()
     real = scene.face_areas > 0
+    faces = np.bincount(scene.face_materials[real], minlength=emissive.size)
     if mode == "off":
         return np.zeros(emissive.size, dtype=bool)
     if mode == "auto":
-        width = lamp_widths(scene, real & emissive[scene.face_materials])
-        extent = float(np.ptp(scene.vertices, axis=0).max()) if scene.vertices.size else 0.0
-        wide = real & (width * resolution > AUTO_PIXELS * extent)
+        emissive &= faces <= MAX_FACES
+        lamp = real & emissive[scene.face_materials]
+        width, label = lamp_widths(scene, lamp, labels=True)
+        reach = lamp_reach(scene, lamp, label)
+        wide = lamp & (width * resolution > 2.0 * AUTO_PIXELS * reach)
         emissive &= np.bincount(scene.face_materials[wide], minlength=emissive.size) == 0
-    faces = np.bincount(scene.face_materials[real], minlength=emissive.size)
     area = np.bincount(scene.face_materials[real], weights=scene.face_areas[real],
                        minlength=emissive.size)
     out = np.zeros(emissive.size, dtype=bool)
@@ -169,8 +179,9 @@ def exact_materials(scene, mode="all", resolution=64):
     return out
 
 
-def lamp_widths(scene, faces):
-    """(F,) float: the width (area / longest extent, m) of the lamp each face belongs to.
+def lamp_widths(scene, faces, labels=False):
+    """(F,) float: the width (area / longest extent, m) of the lamp each face belongs to; with
+    ``labels``, also (F,) int64: the lamp of each face (faces not in ``faces`` their own).
 
     A lamp is a sheet of ``faces`` (bool mask) of one material that share vertices and face the
     same way: a panel meshed into a grid of small faces (an imported or pre-meshed luminaire)
@@ -185,7 +196,7 @@ def lamp_widths(scene, faces):
     width = scene.face_areas / np.maximum(longest, 1e-300)
     faces = np.asarray(faces, dtype=bool)
     if faces.sum() < 2:
-        return width
+        return (width, np.arange(F)) if labels else width
     face_of = np.repeat(np.arange(F), scene.face_sizes)
     verts = np.asarray(scene.corner_verts, dtype=np.int64)
     keep = faces[face_of]
@@ -206,7 +217,74 @@ def lamp_widths(scene, faces):
     area = np.bincount(label, weights=scene.face_areas, minlength=F)
     lamp = area / np.maximum((hi - lo).max(axis=1), 1e-300)
     multi = faces & (np.bincount(label, minlength=F)[label] > 1)
-    return np.where(multi, lamp[label], width)
+    width = np.where(multi, lamp[label], width)
+    return (width, label) if labels else width
+
+
+#: Rays per lamp and emitting side that :func:`lamp_reach` casts, cosine-distributed.
+REACH_RAYS = 32
+
+
+def lamp_reach(scene, faces, label):
+    """(F,) float: for each face in ``faces`` (bool), the typical distance of the surfaces its
+    lamp lights (m); the scene's largest extent elsewhere.
+
+    From the lamp's centre (``label``: :func:`lamp_widths`' lamps), on each side it emits
+    from, REACH_RAYS rays in a fixed cosine-weighted pattern (a lamp's light leaves that way)
+    find the surfaces in front of it; the median hit distance is that side's, and the lamp's is
+    its farthest side's (a panel's back facing the ceiling 1 cm above it does not make it wide).
+    A side whose rays all escape (open to the world) gives the scene's extent.
+    """
+    F = scene.face_areas.size
+    extent = float(np.ptp(scene.vertices, axis=0).max()) if scene.vertices.size else 0.0
+    out = np.full(F, extent)
+    faces = np.flatnonzero(faces)
+    if not faces.size or extent <= 0.0:
+        return out
+    from .conforming import _face_triangles
+    from .raycast import build_bvh, closest_hit
+
+    every = np.flatnonzero(scene.face_areas > 0)
+    tri, _ = _face_triangles(scene, every)
+    verts = np.asarray(scene.vertices, dtype=np.float64)
+    bvh = build_bvh(verts[np.asarray(scene.corner_verts)[tri]])
+    lamps, inverse = np.unique(label[faces], return_inverse=True)
+    n = lamps.size
+    area = scene.face_areas[faces]
+    polys = padded_polygons(scene.vertices, scene.corner_verts, scene.face_starts,
+                            scene.face_sizes)[faces]
+    centre = np.zeros((n, 3))
+    np.add.at(centre, inverse, area[:, None] * polys.mean(axis=1))
+    centre /= np.bincount(inverse, weights=area, minlength=n)[:, None]
+    first = np.zeros(n, dtype=np.int64)
+    first[inverse[::-1]] = faces[::-1]                   # one face of each lamp
+    normal = np.asarray(scene.face_normals, dtype=np.float64)[first]
+    mat = scene.face_materials[first]
+    k = np.arange(REACH_RAYS) + 0.5
+    r, phi = np.sqrt(k / REACH_RAYS), k * np.pi * (3.0 - np.sqrt(5.0))
+    local = np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(1.0 - r * r)], axis=1)
+    reach = np.zeros(n)
+    for sign, le in ((1.0, scene.emission), (-1.0, scene.back_materials()[1])):
+        side = np.flatnonzero(np.any(np.asarray(le, dtype=np.float64)[mat] > 0, axis=1))
+        if not side.size:
+            continue
+        z = sign * normal[side]
+        a = np.eye(3)[np.argmin(np.abs(z), axis=1)]
+        x = a - np.sum(a * z, axis=1, keepdims=True) * z
+        x /= np.linalg.norm(x, axis=1, keepdims=True)
+        y = np.cross(z, x)
+        d = (local[None, :, :1] * x[:, None] + local[None, :, 1:2] * y[:, None]
+             + local[None, :, 2:] * z[:, None]).reshape(-1, 3)
+        o = np.repeat(centre[side] + 1e-6 * extent * z, REACH_RAYS, axis=0)
+        t, _ = closest_hit(bvh, o, d)
+        t = t.reshape(side.size, REACH_RAYS)
+        t = np.where(np.isfinite(t), t, np.nan)
+        seen = np.isfinite(t).any(axis=1)
+        med = np.full(side.size, extent)
+        med[seen] = np.nanmedian(t[seen], axis=1)
+        reach[side] = np.maximum(reach[side], med)
+    out[faces] = np.where(reach[inverse] > 0, reach[inverse], extent)
+    return out
 
 
 class Emitters:

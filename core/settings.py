@@ -163,7 +163,7 @@ METHODS = (
 )
 EXACT_DIRECT = (
     Choice("auto", "Small", "Emitters too narrow for the hemicube (under 2 of its pixels "
-           "across the scene: small lamps, LED strips)"),
+           "seen from what they light: small lamps, LED strips)"),
     Choice("all", "All", "Every emitter (within the limits)"),
     Choice("off", "Off", "The hemicube sees every emitter"),
 )

@@ -107,7 +107,7 @@ def run(ctx):
     sec.blocks.append(
         f"**What the default does.** `exact_direct='{default_mode}'` took the lamp exactly at "
         f"{', '.join(f'{s * 100:g} cm' for s in small) or 'no size'} (under "
-        f"{AUTO_PIXELS:g} hemicube pixels across the scene) and left the wider ones "
+        f"{AUTO_PIXELS:g} hemicube pixels seen from the floor) and left the wider ones "
         "to the hemicube; its worst floor vertex is off by "
         f"{pct(worst_vertex)} (at {at * 100:g} cm). With `'off'` the hemicube alone reads "
         + ", ".join(f"{s * 100:g} cm: mean {pct(o[0])}" for s, o in zip(sizes, off) if o)

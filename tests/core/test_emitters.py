@@ -16,6 +16,8 @@ from core.exact import _clip_halfspace, point_polygon_form_factor
 from core.scene import scene_from_polygons
 from core.settings import BakeSettings
 
+from builders import box_quads
+
 W, D, H = 4.0, 4.0, 3.0
 RHO = 0.5
 
@@ -132,6 +134,46 @@ def test_auto_judges_a_meshed_lamp_as_the_one_quad_lamp(size):
     # Faces that share no vertex stay lamps of their own: the walls keep their own widths.
     np.testing.assert_allclose(lamp_widths(meshed, lamp)[~lamp],
                                lamp_widths(meshed, np.zeros_like(lamp))[~lamp])
+
+
+def _moved_and_extended(scene, scale, far):
+    """``scene`` scaled by ``scale`` and with a 1 m box (walls' material) ``far`` metres (times
+    ``scale``) along x from the room: the same room as part of a larger building, or in
+    millimetres."""
+    v = np.asarray(scene.vertices, dtype=np.float64)
+    polys = [list(scene.corner_verts[s:s + k]) for s, k in zip(scene.face_starts,
+                                                              scene.face_sizes)]
+    box, _ = box_quads((1.0, 1.0, 1.0), 1.0)
+    box = box.reshape(-1, 3) + [far, 0.0, 0.0]
+    quads = (len(v) + np.arange(box.shape[0])).reshape(-1, 4).tolist()
+    return scene_from_polygons(scale * np.vstack([v, box]), polys + quads,
+                               np.concatenate([scene.face_materials,
+                                               np.ones(len(quads), np.int64)]),
+                               scene.reflectance, scene.emission)
+
+
+@pytest.mark.parametrize("size", [0.1, 0.3])
+def test_auto_judges_a_lamp_by_what_it_lights_not_by_the_building_around_it(size):
+    # The same lamp 2.95 m over the same floor, alone, as part of a building 80 m long, and in
+    # millimetres: its width in hemicube pixels (w R / 2 d, d the distance of what it lights,
+    # core.emitters.lamp_reach) is the same, so 'auto' takes it alike. Measured against the
+    # building's extent, a 0.6 m ceiling panel was hemicube-lit in 1 to 3 rooms of
+    # bench.interiors and lit exactly in 6 and 12.
+    from core.emitters import AUTO_PIXELS, lamp_reach, lamp_widths
+
+    scene, _ = _room(size)
+    lamp = np.zeros(scene.n_faces, dtype=bool)
+    lamp[6] = True
+    width, label = lamp_widths(scene, lamp, labels=True)
+    reach = lamp_reach(scene, lamp, label)[6]
+    assert 2.95 < reach < 5.0                     # the floor under it, and the walls further
+    # Oracle: the pixel count of the lamp's width at that distance, at R = 64.
+    taken = width[6] * 64 / (2 * reach) < AUTO_PIXELS
+    assert taken == (size < 0.2)
+    assert exact_materials(scene, "auto").tolist() == [False, False, taken]
+    for scale, far in ((1.0, 80.0), (1000.0, 0.0), (1000.0, 80.0)):
+        other = _moved_and_extended(scene, scale, far + W + 1.0)
+        assert exact_materials(other, "auto").tolist() == [False, False, taken], (scale, far)
 
 
 #: The hemicube at R = 256 sees a 0.3 m lamp 3 m away over ~20 pixels: its mean over the floor
