@@ -233,7 +233,8 @@ def lamp_reach(scene, faces, label):
     from, REACH_RAYS rays in a fixed cosine-weighted pattern (a lamp's light leaves that way)
     find the surfaces in front of it; the median hit distance is that side's, and the lamp's is
     its farthest side's (a panel's back facing the ceiling 1 cm above it does not make it wide).
-    A side whose rays all escape (open to the world) gives the scene's extent.
+    A side whose rays all escape (open to the world) lights nothing; a lamp with no side that
+    does gets the scene's extent.
     """
     F = scene.face_areas.size
     extent = float(np.ptp(scene.vertices, axis=0).max()) if scene.vertices.size else 0.0
@@ -280,9 +281,7 @@ def lamp_reach(scene, faces, label):
         t = t.reshape(side.size, REACH_RAYS)
         t = np.where(np.isfinite(t), t, np.nan)
         seen = np.isfinite(t).any(axis=1)
-        med = np.full(side.size, extent)
-        med[seen] = np.nanmedian(t[seen], axis=1)
-        reach[side] = np.maximum(reach[side], med)
+        reach[side[seen]] = np.maximum(reach[side[seen]], np.nanmedian(t[seen], axis=1))
     out[faces] = np.where(reach[inverse] > 0, reach[inverse], extent)
     return out
 
