@@ -34,7 +34,7 @@ import copy
 import numpy as np
 
 from .exact import bilinear, gauss_square, pair_form_factor, point_polygon_form_factor
-from .geometry import patch_extents
+from .geometry import patch_extents, unit_frames
 from .patches import connected_labels
 from .progress import checkpoint
 from .shadow_memo import PointTable, point_keys
@@ -64,11 +64,8 @@ MAX_AREA_SHARE = 0.1
 #: 2026-12-05) read the Cornell box 1.31 -> 1.18 %, the office 2.65 -> 2.58 % but took 44 ->
 #: 56 s, the apartment 3.06 -> 3.12 % and 86 -> 121 s, and the office furnace of
 #: tests/core/test_stability.py read up to 1.1 % high (patches beside its 0.6 m panel, whose
-#: rows disagree with their exact light: README, "Why that furnace fails"): so 2.
-#: Until 2026-12-07 the width was measured against the scene's largest extent instead of d:
-#: the same 0.6 m panel over the same floor was then lit by the hemicube in a suite of 1 to 3
-#: rooms (bench.interiors; 6.4 to 2.1 px) and exactly in 6 and 12 (1.0 and 0.5 px), which
-#: made the 30,000-vertex bake's lights stage 0.8 s -> 19 s.
+#: rows disagree with their exact light: README, "Why that furnace fails"): so 2. (Measured
+#: across the scene's extent instead of d, a panel was lit exactly only in a long building.)
 AUTO_PIXELS = 2.0
 
 #: Shadow rays per (point, emitter) in the first round, cast where the anchor's or a rim ray
@@ -222,7 +219,7 @@ def lamp_widths(scene, faces, labels=False):
 
 
 #: Rays per lamp and emitting side that :func:`lamp_reach` casts, cosine-distributed.
-REACH_RAYS = 32
+REACH_RAYS = 128
 
 
 def lamp_reach(scene, faces, label):
@@ -245,12 +242,11 @@ def lamp_reach(scene, faces, label):
     from .conforming import _face_triangles
     from .raycast import build_bvh, closest_hit
 
-    every = np.flatnonzero(scene.face_areas > 0)
-    tri, _ = _face_triangles(scene, every)
+    tri = _face_triangles(scene, np.flatnonzero(scene.face_areas > 0))[0]
     verts = np.asarray(scene.vertices, dtype=np.float64)
     bvh = build_bvh(verts[np.asarray(scene.corner_verts)[tri]])
-    lamps, inverse = np.unique(label[faces], return_inverse=True)
-    n = lamps.size
+    inverse = np.unique(label[faces], return_inverse=True)[1]
+    n = int(inverse.max()) + 1
     area = scene.face_areas[faces]
     polys = padded_polygons(scene.vertices, scene.corner_verts, scene.face_starts,
                             scene.face_sizes)[faces]
@@ -270,10 +266,7 @@ def lamp_reach(scene, faces, label):
         if not side.size:
             continue
         z = sign * normal[side]
-        a = np.eye(3)[np.argmin(np.abs(z), axis=1)]
-        x = a - np.sum(a * z, axis=1, keepdims=True) * z
-        x /= np.linalg.norm(x, axis=1, keepdims=True)
-        y = np.cross(z, x)
+        x, y = unit_frames(z)
         d = (local[None, :, :1] * x[:, None] + local[None, :, 1:2] * y[:, None]
              + local[None, :, 2:] * z[:, None]).reshape(-1, 3)
         o = np.repeat(centre[side] + 1e-6 * extent * z, REACH_RAYS, axis=0)

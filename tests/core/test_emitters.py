@@ -136,17 +136,21 @@ def test_auto_judges_a_meshed_lamp_as_the_one_quad_lamp(size):
                                lamp_widths(meshed, np.zeros_like(lamp))[~lamp])
 
 
-def _moved_and_extended(scene, scale, far):
-    """``scene`` scaled by ``scale`` and with a 1 m box (walls' material) ``far`` metres (times
-    ``scale``) along x from the room: the same room as part of a larger building, or in
-    millimetres."""
+def _moved_and_extended(scene, scale, far, turn=0.0):
+    """``scene`` with a 1 m box (walls' material) ``far`` metres along x from the room, turned
+    by ``turn`` degrees about a tilted axis and scaled by ``scale``: the same room as part of a
+    larger building, turned, or in millimetres."""
     v = np.asarray(scene.vertices, dtype=np.float64)
     polys = [list(scene.corner_verts[s:s + k]) for s, k in zip(scene.face_starts,
                                                               scene.face_sizes)]
     box, _ = box_quads((1.0, 1.0, 1.0), 1.0)
     box = box.reshape(-1, 3) + [far, 0.0, 0.0]
     quads = (len(v) + np.arange(box.shape[0])).reshape(-1, 4).tolist()
-    return scene_from_polygons(scale * np.vstack([v, box]), polys + quads,
+    axis = np.array([0.3, 0.5, 1.0]) / np.linalg.norm([0.3, 0.5, 1.0])
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    a = np.radians(turn)
+    rot = np.eye(3) + np.sin(a) * k + (1 - np.cos(a)) * k @ k        # Rodrigues
+    return scene_from_polygons(scale * np.vstack([v, box]) @ rot.T, polys + quads,
                                np.concatenate([scene.face_materials,
                                                np.ones(len(quads), np.int64)]),
                                scene.reflectance, scene.emission)
@@ -154,8 +158,8 @@ def _moved_and_extended(scene, scale, far):
 
 @pytest.mark.parametrize("size", [0.1, 0.3])
 def test_auto_judges_a_lamp_by_what_it_lights_not_by_the_building_around_it(size):
-    # The same lamp 2.95 m over the same floor, alone, as part of a building 80 m long, and in
-    # millimetres: its width in hemicube pixels (w R / 2 d, d the distance of what it lights,
+    # The same lamp 2.95 m over the same floor, alone, as part of a building 80 m long, turned
+    # and in millimetres: its width in hemicube pixels (w R / 2 d, d the distance of what it lights,
     # core.emitters.lamp_reach) is the same, so 'auto' takes it alike. Measured against the
     # building's extent, a 0.6 m ceiling panel was hemicube-lit in 1 to 3 rooms of
     # bench.interiors and lit exactly in 6 and 12.
@@ -171,8 +175,9 @@ def test_auto_judges_a_lamp_by_what_it_lights_not_by_the_building_around_it(size
     taken = width[6] * 64 / (2 * reach) < AUTO_PIXELS
     assert taken == (size < 0.2)
     assert exact_materials(scene, "auto").tolist() == [False, False, taken]
-    for scale, far in ((1.0, 80.0), (1000.0, 0.0), (1000.0, 80.0)):
-        other = _moved_and_extended(scene, scale, far + W + 1.0)
+    for scale, far, turn in ((1.0, 80.0, 0.0), (1000.0, 0.0, 0.0), (1000.0, 80.0, 0.0),
+                             (1.0, 0.0, 37.0), (1000.0, 80.0, 111.0)):
+        other = _moved_and_extended(scene, scale, far + W + 1.0, turn)
         assert exact_materials(other, "auto").tolist() == [False, False, taken], (scale, far)
 
 
