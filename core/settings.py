@@ -162,8 +162,8 @@ METHODS = (
                                       "sources"),
 )
 EXACT_DIRECT = (
-    Choice("auto", "Small", "Emitters too narrow for the hemicube (under 2 of its pixels "
-           "seen from what they light: small lamps, LED strips)"),
+    Choice("auto", "Small", "Emitters too narrow for the hemicube (under 4 of its pixels "
+           "seen from what they light: small lamps, downlights, LED strips)"),
     Choice("all", "All", "Every emitter (within the limits)"),
     Choice("off", "Off", "The hemicube sees every emitter"),
 )

@@ -87,7 +87,7 @@ def run(ctx):
         worst=f"mean {pct(worst_mean)}, worst vertex {pct(worst_vertex)} (at {at * 100:g} cm;"
               f" tolerance {pct(VERTEX_RTOL, 2)} per vertex)",
         mitigation="`exact_direct` (default `'auto'`): contour integral + shadow rays for "
-                   "emitters under 2 hemicube pixels (`core/emitters.py`)",
+                   f"emitters under {AUTO_PIXELS:g} hemicube pixels (`core/emitters.py`)",
         guards=[guard("tests/core/test_emitters.py")])
     sec.blocks += [
         "**Scene.** A 4 × 4 × 3 m room, walls and ceiling black, floor reflectance 0.5, a "
