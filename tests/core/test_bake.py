@@ -517,7 +517,12 @@ def test_report_keys(small_room_direct):
     assert set(rep) >= {"patches", "nodes_active", "faces_dropped", "method", "solver",
                         "iterations", "residual", "converged", "timings", "energy",
                         "form_factor_bytes", "warnings"}
-    assert set(rep["timings"]) == {"patches", "form_factors", "solve", "colours", "total"}
+    # A "lights" stage exactly when there are direct lights: here the room's ceiling panel,
+    # about 3 pixels of these tests' R = 32 hemicube from what it lights (6 at the default 64),
+    # is lit exactly (core.emitters.AUTO_PIXELS).
+    assert rep["lights"]["exact_emitter_faces"] == 1
+    assert set(rep["timings"]) == {"patches", "lights", "form_factors", "solve", "colours",
+                                   "total"}
     n = rep["nodes_active"]
     assert rep["matrix_bytes"] == 8 * n * n                # float64 matrix of the direct solve
     assert 0 < rep["form_factor_bytes"] < 5 * n * n        # kept rows: float32 + column indices
