@@ -21,7 +21,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench.stability.scenes import Builder, quad, room_walls  # noqa: E402
+from bench.stability.scenes import LAMP_ROOM, lamp_room  # noqa: E402
 import core.emitters  # noqa: E402
 from core.bake import bake  # noqa: E402
 from core.exact import point_polygon_form_factor  # noqa: E402
@@ -56,13 +56,8 @@ def uv_sphere(centre, r, nu, nv):
 def bulb_room(r, nu, nv):
     """The room with the bulb (radiance 1 / (pi r^2): the same power at every radius); the
     scene, its groups and the bulb's polygons."""
-    W, D, H = 4.0, 4.0, 3.0
-    b = Builder()
-    b.add(quad((0, 0, 0), (W, 0, 0), (0, D, 0)), 0, "floor")
-    b.add(quad((0, 0, H), (0, D, 0), (W, 0, 0)), 1, "ceiling")
-    for name, poly in room_walls(W, D, H):
-        b.add(poly, 1, name)
-    polys = uv_sphere(np.array([1.3, 2.1, H - 0.5]), r, nu, nv)
+    b = lamp_room()
+    polys = uv_sphere(np.array([1.3, 2.1, LAMP_ROOM[2] - 0.5]), r, nu, nv)
     for poly in polys:
         b.add(poly, 2, "lamp")
     em = np.zeros((3, 3))

@@ -64,13 +64,10 @@ MAX_AREA_SHARE = 0.1
 #: 2026-12-05) read the Cornell box 1.31 -> 1.18 %, the office 2.65 -> 2.58 % but took 44 ->
 #: 56 s, the apartment 3.06 -> 3.12 % and 86 -> 121 s, and the office furnace of
 #: tests/core/test_stability.py read up to 1.1 % high (patches beside its 0.6 m panel, whose
-#: rows disagree with their exact light: README, "Why that furnace fails"): so no lamp as wide
-#: as theirs (6.1 to 8.4 px). Below about 4 px the hemicube's error on the direct light passes
-#: the 5 % error goal (black room: 4.4 % at 0.4 m, 4.3 px, worst vertex 34 %; 7.8 % at 0.3 m,
-#: 3.3 px, where its false contrast also refines the floor to 6,461 vertices against 120 and
-#: takes 3.3 s against 0.9 s; 2026-12-07): a 20 to 30 cm downlight under a 2.5 to 3 m ceiling
-#: is that wide, so 4 (2 until then). (Measured across the scene's extent instead of d, a
-#: panel was lit exactly only in a long building.)
+#: rows disagree with their exact light: README, "Why that furnace fails"): no lamp as wide as
+#: theirs (6.1 to 8.4 px). Under about 4 px the hemicube misses the 5 % goal on the direct
+#: light (4.4 % at 4.3 px; at 3.3 px 7.8 % and 6,461 vertices in 3.3 s, exact: 120 in 0.9 s;
+#: README "At 4 pixels"): a 20 to 30 cm downlight under a 3 m ceiling. So 4 (2 before).
 AUTO_PIXELS = 4.0
 
 #: Shadow rays per (point, emitter) in the first round, cast where the anchor's or a rim ray

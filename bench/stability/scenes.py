@@ -124,18 +124,28 @@ def room(*, drop=0.3, fan_walls=0, copy=None, offset=(0.0, 0.0, 0.0), scale=1.0)
     return b.scene(ROOM_RHO, em)
 
 
-def emitter_room(size, walls_rho=0.0):
-    """The 4 x 4 x 3 m room of tests/core/test_emitters.py: floor (reflectance 0.5, material 0),
-    walls and ceiling ``walls_rho`` (1), a square lamp of side ``size`` 5 cm under the ceiling at
-    (1.3, 2.1), radiance 1 / size^2 (2): the same power at every size. Returns the scene, the
-    groups and the lamp's polygon (4, 3)."""
-    W, D, H = 4.0, 4.0, 3.0
+#: The room of class 1 (W, D, H m).
+LAMP_ROOM = (4.0, 4.0, 3.0)
+
+
+def lamp_room():
+    """A Builder holding the LAMP_ROOM's floor (material 0), ceiling and walls (1), inward."""
+    W, D, H = LAMP_ROOM
     b = Builder()
     b.add(quad((0, 0, 0), (W, 0, 0), (0, D, 0)), 0, "floor")
     b.add(quad((0, 0, H), (0, D, 0), (W, 0, 0)), 1, "ceiling")
     for name, poly in room_walls(W, D, H):
         b.add(poly, 1, name)
-    lamp(b, 1.3, 2.1, H - 0.05, size, 2)
+    return b
+
+
+def emitter_room(size, walls_rho=0.0):
+    """The 4 x 4 x 3 m room of tests/core/test_emitters.py: floor (reflectance 0.5, material 0),
+    walls and ceiling ``walls_rho`` (1), a square lamp of side ``size`` 5 cm under the ceiling at
+    (1.3, 2.1), radiance 1 / size^2 (2): the same power at every size. Returns the scene, the
+    groups and the lamp's polygon (4, 3)."""
+    b = lamp_room()
+    lamp(b, 1.3, 2.1, LAMP_ROOM[2] - 0.05, size, 2)
     em = np.zeros((3, 3))
     em[2] = 1.0 / size ** 2
     scene, groups = b.scene(np.array([[0.5] * 3, [walls_rho] * 3, [0.0] * 3]), em)
