@@ -21,6 +21,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bench.stability.common import corners_of, rel_mean_abs  # noqa: E402
 from bench.stability.scenes import LAMP_ROOM, lamp_room  # noqa: E402
 import core.emitters  # noqa: E402
 from core.bake import bake  # noqa: E402
@@ -68,9 +69,7 @@ def bulb_room(r, nu, nv):
 
 def floor_error(result, groups, polys, le):
     m = result.output
-    faces = np.flatnonzero(np.isin(m.face_parent, groups["floor"]))
-    c = np.concatenate([np.arange(m.face_starts[f], m.face_starts[f] + m.face_sizes[f])
-                        for f in faces])
+    c = corners_of(m, groups["floor"])
     pts = m.vertices[m.corner_verts[c]]
     up = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
     # Every bulb face has 3 or 4 corners: triangles padded to 4 by repeating a corner.
@@ -81,7 +80,7 @@ def floor_error(result, groups, polys, le):
     exact = RHO * le * np.where(facing, ff, 0.0).sum(axis=1)
     got = m.corner_colours[c, 0]
     rel = np.abs(got / exact - 1.0)
-    return np.abs(got - exact).mean() / exact.mean(), rel.max(), np.unique(m.corner_verts[c]).size
+    return rel_mean_abs(got, exact), rel.max(), np.unique(m.corner_verts[c]).size
 
 
 def main():
@@ -93,14 +92,16 @@ def main():
         for label, lift in (("auto (default)", False), ("exact, cap lifted", True)):
             core.emitters.MAX_FACES = 10 ** 6 if lift else cap
             t = time.perf_counter()
-            result = bake(scene, BakeSettings(exact_direct="all" if lift else "auto"))
+            try:
+                result = bake(scene, BakeSettings(exact_direct="all" if lift else "auto"))
+            finally:
+                core.emitters.MAX_FACES = cap
             seconds = time.perf_counter() - t
             mean, worst, nv_floor = floor_error(result, groups, polys, le)
             taken = result.report.get("lights", {}).get("exact_emitter_faces", 0)
             print(f"| r = {r * 100:g} cm, {nu} x {nv} | {len(polys)} | {label} ({taken} faces "
                   f"exact) | {nv_floor} | {mean * 100:.2f} % | {worst * 100:.1f} % | "
                   f"{seconds:.1f} s |", flush=True)
-    core.emitters.MAX_FACES = cap
 
 
 if __name__ == "__main__":
