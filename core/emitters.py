@@ -22,28 +22,41 @@ neighbouring points do not share one pattern.
 The solve and the gathers then carry only what the emitters *reflect*: their emission enters as
 the first bounce, like a point light's (:class:`core.pipeline.Nodes`, ``exact``).
 
+A lamp of several faces (a bulb modelled as a sphere, a meshed panel: faces of one material
+that share vertices) is one light, its faces' light summed and one visible fraction for them
+all (:mod:`core.lamps`).
+
 Which emitters (``exact_direct``): 'auto' the emissive materials too narrow for the hemicube
-(``AUTO_PIXELS``), 'all' every one; in either case fewest faces first, while the faces taken
-stay within ``MAX_FACES`` and their area within ``MAX_AREA_SHARE`` of the scene's (a luminous
-ceiling, or hundreds of faces, is left to the hemicube, which sees a large source well; the cost
-here grows with points x faces).
+(``AUTO_PIXELS``), 'all' every one; in either case fewest faces first, while the lamps taken stay
+within ``MAX_LAMPS``, their faces within ``MAX_FACES`` and their area within ``MAX_AREA_SHARE``
+of the scene's (a luminous ceiling is left to the hemicube, which sees a large source well; the
+shadow rays' cost grows with points x lamps, the unshadowed light's with points x faces).
 """
 
 import copy
 
 import numpy as np
 
-from .exact import bilinear, gauss_square, pair_form_factor, point_polygon_form_factor
-from .geometry import patch_extents, unit_frames
-from .patches import connected_labels
+from .exact import bilinear, gauss_square, pair_form_factor
+from .lamps import _ALPHA, _ROOT, Lamp, centroids, form_factors, lamp_labels, lamp_reach, \
+    lamp_widths
 from .progress import checkpoint
 from .shadow_memo import PointTable, point_keys
 from .transfer import padded_polygons
 
-#: Emissive faces lit exactly at most (by material, fewest faces first). Measured cost: one
-#: (point, face) pair costs the contour integral (~1.3 us) and FIRST_ROUND + 1 shadow rays
-#: where the face gives more than the culled share (core.lights.CULL).
-MAX_FACES = 64
+#: Lamps (lights) lit exactly at most (by material, fewest faces first): one (point, lamp) pair
+#: costs FIRST_ROUND + 1 shadow rays and the rim's where the lamp gives more than the culled
+#: share (core.lights.CULL).
+MAX_LAMPS = 64
+
+#: Emissive faces lit exactly at most: one (point, face) pair costs the contour integral
+#: (~1.3 us) near the face, the point-to-area kernel beyond core.lamps.FAR of its diameters.
+#: A lamp's own patches are near all its faces, so a closed lamp of n faces costs about n^2
+#: integrals for the light inside it (bench/bench_bulb.py, a 5 cm sphere in a 4 m room: 512
+#: faces 11.4 s, the hemicube 12.1 s; 2,048 faces 106 s, the hemicube 30 s; under a profiler
+#: 77 s of 119 s were the faces' integrals).
+#: A UV sphere of Blender's default 32 x 16 has 512 faces, one subdivided once 2,048.
+MAX_FACES = 1024
 
 #: Emissive area lit exactly at most, as a share of all the surfaces' area. A lamp is small
 #: against its room; a luminous ceiling or a furnace (every wall emits) is an extended source
@@ -135,15 +148,6 @@ class _Kept:
         return out
 
 
-#: Generator of the rank-1 (R3) lattice: the powers of the root of x^4 = x + 1 (Roberts 2018).
-#: Two coordinates place a sample in its patch, the third picks the patch (by area). With one
-#: coordinate doing both (the patch from u's interval, u rescaled in it), a lamp of 2 patches
-#: had every sample's u in one of two narrow bands (frac(2 alpha) is near 1/2): floor points
-#: seeing a quarter of the Cornell box's lamp read 0.26 +- 0.11 of it with 24 rays.
-_ROOT = 1.2207440846057596
-_ALPHA = 1.0 / _ROOT ** np.arange(1, 4)
-
-
 def exact_materials(scene, mode="all", resolution=64):
     """(M,) bool: the emissive materials whose faces are lit exactly (see the module doc).
 
@@ -151,7 +155,7 @@ def exact_materials(scene, mode="all", resolution=64):
     ``AUTO_PIXELS`` pixels of a hemicube of ``resolution`` seen from what the face's lamp
     lights (width w = area / longest extent of the lamp, :func:`lamp_widths`, at the distance
     d of :func:`lamp_reach`: w R / (2 d) pixels). Materials with more than ``MAX_FACES`` faces
-    are not judged: none of them is taken.
+    or ``MAX_LAMPS`` lamps (:func:`core.lamps.lamp_labels`) are not judged: none is taken.
     """
     emissive = scene.emissive_materials()
     real = scene.face_areas > 0
@@ -167,122 +171,25 @@ def exact_materials(scene, mode="all", resolution=64):
         emissive &= np.bincount(scene.face_materials[wide], minlength=emissive.size) == 0
     area = np.bincount(scene.face_materials[real], weights=scene.face_areas[real],
                        minlength=emissive.size)
+    lit = np.flatnonzero(real & emissive[scene.face_materials])
+    first = np.unique(lamp_labels(scene, lit), return_index=True)[1]
+    lamps = np.bincount(scene.face_materials[lit[first]], minlength=emissive.size)
     out = np.zeros(emissive.size, dtype=bool)
-    total, total_area, limit = 0, 0.0, MAX_AREA_SHARE * float(area.sum())
+    total, count, total_area, limit = 0, 0, 0.0, MAX_AREA_SHARE * float(area.sum())
     for m in np.argsort(np.where(emissive, faces, np.iinfo(np.int64).max), kind="stable"):
-        if not emissive[m] or total + faces[m] > MAX_FACES or total_area + area[m] > limit:
+        if not emissive[m] or total + faces[m] > MAX_FACES or count + lamps[m] > MAX_LAMPS \
+                or total_area + area[m] > limit:
             break
         out[m] = True
         total += int(faces[m])
+        count += int(lamps[m])
         total_area += float(area[m])
     return out
 
 
-def lamp_widths(scene, faces, labels=False):
-    """(F,) float: the width (area / longest extent, m) of the lamp each face belongs to; with
-    ``labels``, also (F,) int64: the lamp of each face (faces not in ``faces`` their own).
-
-    A lamp is a sheet of ``faces`` (bool mask) of one material that share vertices and face the
-    same way: a panel meshed into a grid of small faces (an imported or pre-meshed luminaire)
-    is one 0.6 m lamp, as wide to the hemicube as the same panel modelled as one quad, not
-    sixteen 0.15 m ones. The lamp's extent is the longest side of its bounding box; faces not in
-    ``faces`` keep their own width.
-    """
-    polys = padded_polygons(scene.vertices, scene.corner_verts, scene.face_starts,
-                            scene.face_sizes)
-    longest = patch_extents(polys, polys.mean(axis=1))[1]
-    F = scene.face_areas.size
-    width = scene.face_areas / np.maximum(longest, 1e-300)
-    faces = np.asarray(faces, dtype=bool)
-    if faces.sum() < 2:
-        return (width, np.arange(F)) if labels else width
-    face_of = np.repeat(np.arange(F), scene.face_sizes)
-    verts = np.asarray(scene.corner_verts, dtype=np.int64)
-    keep = faces[face_of]
-    f, v = face_of[keep], verts[keep]
-    order = np.lexsort((f, v))
-    f, v = f[order], v[order]
-    same = (v[1:] == v[:-1]) & (f[1:] != f[:-1])           # consecutive faces at one vertex
-    a, b = f[:-1][same], f[1:][same]
-    mat = np.asarray(scene.face_materials)
-    nrm = np.asarray(scene.face_normals)
-    link = (mat[a] == mat[b]) & (np.einsum("ij,ij->i", nrm[a], nrm[b]) > 1.0 - 1e-6)
-    label = connected_labels(F, a[link], b[link])
-    pos = np.asarray(scene.vertices, dtype=np.float64)[verts]
-    lo = np.full((F, 3), np.inf)
-    hi = np.full((F, 3), -np.inf)
-    np.minimum.at(lo, label[face_of], pos)
-    np.maximum.at(hi, label[face_of], pos)
-    area = np.bincount(label, weights=scene.face_areas, minlength=F)
-    lamp = area / np.maximum((hi - lo).max(axis=1), 1e-300)
-    multi = faces & (np.bincount(label, minlength=F)[label] > 1)
-    width = np.where(multi, lamp[label], width)
-    return (width, label) if labels else width
-
-
-#: Rays per lamp and emitting side that :func:`lamp_reach` casts, cosine-distributed.
-REACH_RAYS = 128
-
-
-def lamp_reach(scene, faces, label):
-    """(F,) float: for each face in ``faces`` (bool), the typical distance of the surfaces its
-    lamp lights (m); the scene's largest extent elsewhere.
-
-    From the lamp's centre (``label``: :func:`lamp_widths`' lamps), on each side it emits
-    from, REACH_RAYS rays in a fixed cosine-weighted pattern (a lamp's light leaves that way)
-    find the surfaces in front of it; the median hit distance is that side's, and the lamp's is
-    its farthest side's (a panel's back facing the ceiling 1 cm above it does not make it wide).
-    A side whose rays all escape (open to the world) lights nothing; a lamp with no side that
-    does gets the scene's extent.
-    """
-    F = scene.face_areas.size
-    extent = float(np.ptp(scene.vertices, axis=0).max()) if scene.vertices.size else 0.0
-    out = np.full(F, extent)
-    faces = np.flatnonzero(faces)
-    if not faces.size or extent <= 0.0:
-        return out
-    from .conforming import _face_triangles
-    from .raycast import build_bvh, closest_hit
-
-    tri = _face_triangles(scene, np.flatnonzero(scene.face_areas > 0))[0]
-    verts = np.asarray(scene.vertices, dtype=np.float64)
-    bvh = build_bvh(verts[np.asarray(scene.corner_verts)[tri]])
-    inverse = np.unique(label[faces], return_inverse=True)[1]
-    n = int(inverse.max()) + 1
-    area = scene.face_areas[faces]
-    polys = padded_polygons(scene.vertices, scene.corner_verts, scene.face_starts,
-                            scene.face_sizes)[faces]
-    centre = np.zeros((n, 3))
-    np.add.at(centre, inverse, area[:, None] * polys.mean(axis=1))
-    centre /= np.bincount(inverse, weights=area, minlength=n)[:, None]
-    first = np.zeros(n, dtype=np.int64)
-    first[inverse[::-1]] = faces[::-1]                   # one face of each lamp
-    normal = np.asarray(scene.face_normals, dtype=np.float64)[first]
-    mat = scene.face_materials[first]
-    k = np.arange(REACH_RAYS) + 0.5
-    r, phi = np.sqrt(k / REACH_RAYS), k * np.pi * (3.0 - np.sqrt(5.0))
-    local = np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(1.0 - r * r)], axis=1)
-    reach = np.zeros(n)
-    for sign, le in ((1.0, scene.emission), (-1.0, scene.back_materials()[1])):
-        side = np.flatnonzero(np.any(np.asarray(le, dtype=np.float64)[mat] > 0, axis=1))
-        if not side.size:
-            continue
-        z = sign * normal[side]
-        x, y = unit_frames(z)
-        d = (local[None, :, :1] * x[:, None] + local[None, :, 1:2] * y[:, None]
-             + local[None, :, 2:] * z[:, None]).reshape(-1, 3)
-        o = np.repeat(centre[side] + 1e-6 * extent * z, REACH_RAYS, axis=0)
-        t, _ = closest_hit(bvh, o, d)
-        t = t.reshape(side.size, REACH_RAYS)
-        t = np.where(np.isfinite(t), t, np.nan)
-        seen = np.isfinite(t).any(axis=1)
-        reach[side[seen]] = np.maximum(reach[side[seen]], np.nanmedian(t[seen], axis=1))
-    out[faces] = np.where(reach[inverse] > 0, reach[inverse], extent)
-    return out
-
-
 class Emitters:
-    """The exact emitters of a scene as lights (one per emitting side of every face).
+    """The exact emitters of a scene as lights: one per emitting side of every lamp (a face, or
+    faces of one material that share vertices: :mod:`core.lamps`).
 
     Parameters
     ----------
@@ -295,13 +202,14 @@ class Emitters:
     Attributes
     ----------
     face : (n,) int64
-        Scene face of every light (a face emitting from both sides is two lights).
+        Scene face of every light (a lamp's first; a face emitting from both sides is two
+        lights).
     sign : (n,) float64
-        +1: the face's front emits; -1: its back.
+        +1: the faces' fronts emit; -1: their backs.
     colour : (n, 3) float64
         Emitted radiance of that side.
     size : (n,) float64
-        sqrt(area) of the face (m).
+        sqrt(area) of a lamp's one face; a lamp of several, its longest extent (m).
     faces : (f,) int64
         The faces lit exactly (both their sides: a side that does not emit is no light).
     """
@@ -313,19 +221,33 @@ class Emitters:
         back = np.asarray(scene.back_materials()[1], dtype=np.float64)[
             scene.face_materials[faces]]
         front_on, back_on = np.any(le > 0, axis=1), np.any(back > 0, axis=1)
+        # Sides: every emitting side of every face, fronts first.
         local = np.concatenate([np.flatnonzero(front_on), np.flatnonzero(back_on)])
-        self.face = faces[local]
-        self.sign = np.concatenate([np.ones(front_on.sum()), -np.ones(back_on.sum())])
-        self.colour = np.concatenate([le[front_on], back[back_on]]).reshape(-1, 3)
-        self.size = np.sqrt(scene.face_areas[self.face])
+        side_sign = np.concatenate([np.ones(front_on.sum()), -np.ones(back_on.sum())])
         self.faces = faces
-        self._slot = np.searchsorted(faces, self.face)            # column in the F matrix
-        self._kept = _Kept(self.face.size)            # shared with the recoloured copies
+        self._slot = local                          # each side's face: column in the F matrix
+        self._side_sign = side_sign
+        self._kept = _Kept(local.size)                # shared with the recoloured copies
+        # Lights: the sides of a lamp's faces (core.lamps), fronts first; a lamp of one face
+        # is its sides' lights, in their order.
+        lamp = lamp_labels(scene, faces)
+        key = (side_sign < 0) * (faces.size + 1) + lamp[local]
+        _, first, self._light_of_side = np.unique(key, return_index=True, return_inverse=True)
+        self._light_of_side = self._light_of_side.reshape(-1)
+        self._first = first
+        self.face = faces[local[first]]
+        self.sign = side_sign[first]
+        self.colour = np.concatenate([le[front_on], back[back_on]]).reshape(-1, 3)[first]
         polys = padded_polygons(scene.vertices, scene.corner_verts, scene.face_starts,
                                 scene.face_sizes)
         self._polys = polys[faces] if faces.size else np.zeros((0, 3, 3))
         self._normal = scene.face_normals[faces]
         self._centre = self._polys.mean(axis=1) if faces.size else np.zeros((0, 3))
+        self._mid = centroids(self._polys)                  # area centroids (core.lamps.FAR)
+        self._face_area = scene.face_areas[faces]
+        sides = np.bincount(self._light_of_side, minlength=first.size)
+        self._q = np.where(sides == 1, local[first], -1)    # a one-face light's face slot
+        self.size = np.sqrt(scene.face_areas[self.face])
         # The rim's points per face (a few per lamp face: a list).
         self._rim = []
         for i, n in enumerate(scene.face_sizes[faces]):
@@ -353,6 +275,18 @@ class Emitters:
                 self._anchor[i] = self._corners[best].mean(axis=0)
             else:
                 self._anchor[i] = self._centre[i]
+        self._lamps = {e: self._lamp(e) for e in np.flatnonzero(self._q < 0)}
+        for e, lamp in self._lamps.items():
+            self.size[e] = float(np.ptp(lamp.corners.reshape(-1, 3), axis=0).max()) \
+                if lamp.corners.size else 0.0
+
+    def _lamp(self, e):
+        """:class:`core.lamps.Lamp` of light ``e`` (a lamp of several faces)."""
+        slots = self._slot[self._light_of_side == e]
+        rows = np.concatenate([np.arange(self._start[q], self._stop[q]) for q in slots])
+        return Lamp(self.sign[e], self._corners[rows], self._areas[rows],
+                    self._normal[self._pface[rows]], self._anchor[slots], self._mid[slots],
+                    self._normal[slots], self._face_area[slots])
 
     def __len__(self):
         return int(self.face.size)
@@ -369,12 +303,12 @@ class Emitters:
         front = np.any(np.asarray(scene.emission)[mat] > 0, axis=1)
         back = np.any(np.asarray(scene.back_materials()[1])[mat] > 0, axis=1)
         chosen = np.flatnonzero(materials[scene.face_materials] & (scene.face_areas > 0))
-        had_front = np.isin(self.faces, self.face[self.sign > 0])
-        had_back = np.isin(self.faces, self.face[self.sign < 0])
+        had_front = np.isin(self.faces, self.faces[self._slot[self._side_sign > 0]])
+        had_back = np.isin(self.faces, self.faces[self._slot[self._side_sign < 0]])
         if not np.all(np.isin(chosen, self.faces)) or np.any(front & ~had_front) \
                 or np.any(back & ~had_back) or np.any((front | back) & ~materials[mat]):
             return None
-        slot = self._slot
+        slot = self._slot[self._first]
         le = np.asarray(scene.emission, dtype=np.float64)[mat[slot]]
         be = np.asarray(scene.back_materials()[1], dtype=np.float64)[mat[slot]]
         new = copy.copy(self)
@@ -388,15 +322,24 @@ class Emitters:
         irradiance before shadows. Kept per point for a relight (:data:`KEEP_BYTES`)."""
         if not len(self):
             return []
-        lit = self._kept.unshadowed(origin, normals, self._unshadowed)
-        return list(lit)                                   # per light
+        lit = self._kept.unshadowed(origin, normals, self._unshadowed)      # per side
+        if not self._lamps:
+            return list(lit)                                   # per light
+        order = np.argsort(self._light_of_side, kind="stable")
+        starts = np.searchsorted(self._light_of_side[order], np.arange(len(self)))
+        return list(np.add.reduceat(lit[order], starts, axis=0))
 
     def _unshadowed(self, origin, normals):
-        """(m, n): :meth:`unshadowed` integrated."""
-        ff = point_polygon_form_factor(origin, normals, self._polys)
+        """(sides, m): :meth:`unshadowed` integrated, per emitting side of a face."""
         side = np.einsum("nqj,qj->nq", origin[:, None, :] - self._centre[None], self._normal)
+        front = np.zeros(self.faces.size, dtype=bool)
+        back = np.zeros(self.faces.size, dtype=bool)
+        front[self._slot[self._side_sign > 0]] = True
+        back[self._slot[self._side_sign < 0]] = True
+        ff = form_factors(origin, normals, self._polys, self._mid, self._normal,
+                          self._face_area, ((side > 0) & front) | ((side < 0) & back))
         q = self._slot
-        return np.where(self.sign[:, None] * side[:, q].T > 0, np.pi * ff[:, q].T, 0.0)
+        return np.where(self._side_sign[:, None] * side[:, q].T > 0, np.pi * ff[:, q].T, 0.0)
 
     def near_patch_means(self, patches, two_sided=True):
         """Unshadowed ``pi F`` averaged over the receiver patches near each emitter, integrated
@@ -452,13 +395,13 @@ class Emitters:
         receives[self._pid] = False                 # an emitter's own patches: coplanar, F = 0
         gu, gv, gw = gauss_square(2)
         lo, hi = NEAR_CELLS
-        for e in range(len(self)):                  # per light: at most 2 x MAX_FACES
+        for e in range(self._slot.size):            # per side: at most 2 x MAX_FACES
             q = self._slot[e]
             kk, pp, gap = self._near_pairs(q, centres, radius, e_centre, e_radius, receives)
             if kk.size == 0:
                 continue
             hit = np.unique(pp)
-            normal = self.sign[e] * self._normal[q]
+            normal = self._side_sign[e] * self._normal[q]
             # A receiver wholly behind the emitting side (the ceiling over a downlight) reads 0
             # from every point of it: kept, not integrated.
             ahead = (corners[pp] @ normal).max(axis=1) > (self._corners[kk] @ normal).min(axis=1)
@@ -489,12 +432,18 @@ class Emitters:
             mean = np.pi * acc[hit] / np.asarray(patches.areas, dtype=np.float64)[hit, None]
             if not two_sided:
                 mean[:, 1] = 0.0
-            out_l.append(np.full(hit.size, e))
+            out_l.append(np.full(hit.size, self._light_of_side[e]))
             out_p.append(hit)
             out_m.append(mean)
         if not out_l:
             return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 2))
-        return np.concatenate(out_l), np.concatenate(out_p), np.concatenate(out_m)
+        light, patch, mean = (np.concatenate(a) for a in (out_l, out_p, out_m))
+        if self._lamps:                             # a lamp's faces' shares of one patch
+            key, at = np.unique(light * P + patch, return_inverse=True)
+            total = np.zeros((key.size, 2))
+            np.add.at(total, at.reshape(-1), mean)
+            light, patch, mean = key // P, key % P, total
+        return light, patch, mean
 
     def _near_pairs(self, q, centres, radius, e_centre, e_radius, receives):
         """(emitter patch, receiver patch, gap) of face slot ``q``: every receiver within
@@ -548,9 +497,11 @@ class Emitters:
         angles per point; ``blocked(origin, direction)``: shadow rays ending at
         origin + direction. ``small``: a face narrower than the smallest element; where the
         anchor's and the corners' rays are all clear it is seen whole, no more rays
-        (:data:`core.lights.SMALL_ROUND`).
+        (:data:`core.lights.SMALL_ROUND`). A lamp of several faces: :meth:`core.lamps.Lamp.visible`.
         """
-        q = self._slot[e]
+        q = self._q[e]
+        if q < 0:
+            return self._lamps[e].visible(origin, normals, k, turn, blocked, small, FIRST_ROUND)
         g = origin.shape[0]
         centre = ~blocked(origin, self._anchor[q] - origin)
         if k <= 1:

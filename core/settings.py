@@ -358,7 +358,8 @@ TABLE = (
             "Which emissive surfaces get their direct light exactly at every point (contour "
             "integral with shadow rays) instead of through the hemicube", choices=EXACT_DIRECT,
             exposed=True,
-            doc="At most 64 emissive faces and 10 % of the surfaces' area, by material "
+            doc="At most 64 lamps (faces of one material that share vertices are one lamp, "
+                "core.lamps), 1,024 emissive faces and 10 % of the surfaces' area, by material "
                 "(core.emitters); the hemicube then carries only what they reflect."),
     Setting("sky", "choice", "world", "Sky", "What lights the scene from outside", choices=SKIES,
             exposed=True,

@@ -6,7 +6,7 @@ contour integral (core.exact.point_polygon_form_factor), at every output vertex 
 
 import numpy as np
 
-from core.emitters import AUTO_PIXELS, MAX_AREA_SHARE, MAX_FACES, exact_materials
+from core.emitters import AUTO_PIXELS, MAX_AREA_SHARE, MAX_FACES, MAX_LAMPS, exact_materials
 from core.exact import point_polygon_form_factor
 from core.settings import BY_NAME, EXACT_DIRECT
 
@@ -20,7 +20,7 @@ from .report import Section
 VERTEX_RTOL = 1e-3
 #: A vertex counts as right within this (the README's "within 5 %").
 NEAR = 0.05
-FLOOR_RHO = 0.5
+FLOOR_RHO = scenes.FLOOR_RHO
 
 
 def floor_errors(result, groups, lamp, size):
@@ -34,6 +34,24 @@ def floor_errors(result, groups, lamp, size):
     rel = np.abs(got / exact - 1.0)
     return rel_mean_abs(got, exact), float(rel.max()), float(np.mean(rel <= NEAR)), \
         int(np.unique(m.corner_verts[c]).size)
+
+
+def bulb_errors(result, groups, polys, le):
+    """(mean error, worst vertex error, floor vertices) of a bulb room (:func:`scenes.bulb_room`)
+    against rho sum_f Le F(x -> f) over the faces that turn to x."""
+    m = result.output
+    c = corners_of(m, groups["floor"])
+    pts = m.vertices[m.corner_verts[c]]
+    up = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+    # Every bulb face has 3 or 4 corners: triangles padded to 4 by repeating a corner.
+    stacked = np.stack([np.vstack([q, q[-1:]]) if len(q) == 3 else q for q in polys])
+    ff = point_polygon_form_factor(pts, up, stacked)
+    normal = np.cross(stacked[:, 1] - stacked[:, 0], stacked[:, 2] - stacked[:, 0])
+    facing = np.einsum("pfj,fj->pf", pts[:, None, :] - stacked.mean(1)[None], normal) > 0
+    exact = FLOOR_RHO * le * np.where(facing, ff, 0.0).sum(axis=1)
+    got = m.corner_colours[c, 0]
+    rel = np.abs(got / exact - 1.0)
+    return rel_mean_abs(got, exact), rel.max(), np.unique(m.corner_verts[c]).size
 
 
 def run(ctx):
@@ -88,7 +106,7 @@ def run(ctx):
               f" tolerance {pct(VERTEX_RTOL, 2)} per vertex)",
         mitigation="`exact_direct` (default `'auto'`): contour integral + shadow rays for "
                    f"emitters under {AUTO_PIXELS:g} hemicube pixels (`core/emitters.py`)",
-        guards=[guard("tests/core/test_emitters.py")])
+        guards=[guard("tests/core/test_emitters.py"), guard("tests/core/test_lamps.py")])
     sec.blocks += [
         "**Scene.** A 4 × 4 × 3 m room, walls and ceiling black, floor reflectance 0.5, a "
         "square lamp 5 cm under the ceiling; its radiance is 1 / side², so every size emits "
@@ -112,8 +130,35 @@ def run(ctx):
         f"{pct(worst_vertex)} (at {at * 100:g} cm). With `'off'` the hemicube alone reads "
         + ", ".join(f"{s * 100:g} cm: mean {pct(o[0])}" for s, o in zip(sizes, off) if o)
         + ". Other form-factor methods: rows of the table (full mode only).")
+    sec.blocks += bulbs(ctx, default_mode)
     sec.blocks.append(
-        f"**Mitigation.** `exact_direct='all'` takes every emitter (within {MAX_FACES} faces "
-        f"and {pct(MAX_AREA_SHARE, 2)} of the surfaces' area, `core/emitters.py`); `'auto'` "
-        "only the narrow ones.")
+        f"**Mitigation.** `exact_direct='all'` takes every emitter (within {MAX_LAMPS} lamps, "
+        f"{MAX_FACES} faces and {pct(MAX_AREA_SHARE, 2)} of the surfaces' area, "
+        "`core/emitters.py`); `'auto'` only the narrow ones. A lamp of many faces (faces of one "
+        "material that share a vertex position, any facing) is one light (`core/lamps.py`).")
     return sec
+
+
+def bulbs(ctx, default_mode):
+    """The same room with a bulb modelled as a UV sphere 0.5 m under the ceiling (a lamp of
+    many faces): blocks of the section."""
+    rows = []
+    for r, nu, nv in ctx.pick([(0.05, 12, 6), (0.05, 32, 16), (0.1, 32, 16)], [(0.05, 12, 6)]):
+        scene, groups, polys, le = scenes.bulb_room(r, nu, nv)
+        for mode in (default_mode, "off"):
+            run = ctx.gate.run(scene, ctx.settings(exact_direct=mode))
+            ctx.log(f"emitters bulb {r} {nu}x{nv} {mode}: {run.status} {run.seconds:.1f} s")
+            head = [f"{r * 100:g} cm, {nu} × {nv}", len(polys), f"`{mode}`"]
+            if not run.ok:
+                rows.append(head + [run.status, "", "", secs(run.seconds)])
+                continue
+            mean, worst, nv_floor = bulb_errors(run.result, groups, polys, le)
+            rows.append(head + [nv_floor, pct(mean), pct(worst), secs(run.seconds)])
+    return [
+        "**A bulb modelled as a sphere.** The same room, the square lamp replaced by a UV "
+        "sphere (loose faces, as an import leaves them) 0.5 m under the ceiling, radiance "
+        "1 / (π r²). **Oracle.** `rho sum_f Le F(x -> f)` over the sphere's faces whose "
+        "emitting side faces the floor vertex (a convex lamp does not hide itself). "
+        "`bench/bench_bulb.py` adds a 2,048-face sphere.",
+        table(["bulb", "faces", "exact_direct", "floor vertices", "mean error",
+               "worst vertex", "time"], rows)]

@@ -139,6 +139,10 @@ def lamp_room():
     return b
 
 
+#: Reflectance of the lamp rooms' floors (class 1: :func:`emitter_room`, :func:`bulb_room`).
+FLOOR_RHO = 0.5
+
+
 def emitter_room(size, walls_rho=0.0):
     """The 4 x 4 x 3 m room of tests/core/test_emitters.py: floor (reflectance 0.5, material 0),
     walls and ceiling ``walls_rho`` (1), a square lamp of side ``size`` 5 cm under the ceiling at
@@ -148,7 +152,7 @@ def emitter_room(size, walls_rho=0.0):
     lamp(b, 1.3, 2.1, LAMP_ROOM[2] - 0.05, size, 2)
     em = np.zeros((3, 3))
     em[2] = 1.0 / size ** 2
-    scene, groups = b.scene(np.array([[0.5] * 3, [walls_rho] * 3, [0.0] * 3]), em)
+    scene, groups = b.scene(np.array([[FLOOR_RHO] * 3, [walls_rho] * 3, [0.0] * 3]), em)
     return scene, groups, np.concatenate(b.verts)[-4:]
 
 
@@ -244,3 +248,39 @@ def hung_panel(gap, size=2.0, panel=0.6, le=10.0, rho=0.8):
     scene, groups = b.scene(np.array([[0.0] * 3, [rho] * 3, [0.0] * 3]),
                             np.array([[0.0] * 3, [0.0] * 3, [le] * 3]))
     return scene, groups, np.concatenate(b.verts)[-4:]
+
+
+def uv_sphere(centre, r, nu, nv):
+    """Polygons (outward) of a UV sphere: triangle fans at the poles, quads between."""
+    th = np.linspace(0.0, np.pi, nv + 1)
+    ph = np.linspace(0.0, 2.0 * np.pi, nu + 1)
+
+    def p(i, j):
+        return np.asarray(centre) + r * np.array([np.sin(th[i]) * np.cos(ph[j]),
+                                                  np.sin(th[i]) * np.sin(ph[j]), np.cos(th[i])])
+    polys = []
+    for i in range(nv):
+        for j in range(nu):
+            if i == 0:
+                poly = [p(0, 0), p(1, j + 1), p(1, j)]
+            elif i == nv - 1:
+                poly = [p(i, j), p(i, j + 1), p(nv, 0)]
+            else:
+                poly = [p(i, j), p(i, j + 1), p(i + 1, j + 1), p(i + 1, j)]
+            poly = np.array(poly)
+            n = np.cross(poly[1] - poly[0], poly[2] - poly[0])
+            polys.append(poly if n @ (poly.mean(0) - centre) > 0 else poly[::-1])
+    return polys
+
+
+def bulb_room(r, nu, nv):
+    """The room with the bulb (radiance 1 / (pi r^2): the same power at every radius); the
+    scene, its groups and the bulb's polygons."""
+    b = lamp_room()
+    polys = uv_sphere(np.array([1.3, 2.1, LAMP_ROOM[2] - 0.5]), r, nu, nv)
+    for poly in polys:
+        b.add(poly, 2, "lamp")
+    em = np.zeros((3, 3))
+    em[2] = 1.0 / (np.pi * r * r)
+    scene, groups = b.scene(np.array([[FLOOR_RHO] * 3, [0.0] * 3, [0.0] * 3]), em)
+    return scene, groups, polys, em[2, 0]

@@ -102,7 +102,7 @@ def test_a_relight_reads_the_emitters_contour_integrals_back(monkeypatch, keep):
     s = BakeSettings(output_mode="vertices", element_levels=0, exact_direct="all")
     base = bake(_scene([BULB]), s)
     calls = []
-    for name in ("point_polygon_form_factor", "pair_form_factor"):
+    for name in ("form_factors", "pair_form_factor"):
         def counted(*args, _f=getattr(emitters_module, name), _name=name):
             calls.append(_name)
             return _f(*args)
@@ -110,9 +110,9 @@ def test_a_relight_reads_the_emitters_contour_integrals_back(monkeypatch, keep):
     lamp = [2.0, 1.0, 0.25]
     again = relight(base, emission=_scene([BULB], lamp).emission)
     if keep:
-        assert calls.count("point_polygon_form_factor") == 0
+        assert calls.count("form_factors") == 0
     else:
-        assert calls.count("point_polygon_form_factor") > 0
+        assert calls.count("form_factors") > 0
     assert calls.count("pair_form_factor") == 0      # the near means: kept for the patches
     np.testing.assert_allclose(again.corner_colours, bake(_scene([BULB], lamp), s).corner_colours,
                                rtol=1e-9, atol=1e-15)
