@@ -245,6 +245,7 @@ class Emitters:
         self._centre = self._polys.mean(axis=1) if faces.size else np.zeros((0, 3))
         self._mid = centroids(self._polys)                  # area centroids (core.lamps.FAR)
         self._face_area = scene.face_areas[faces]
+        self._emits = (front_on, back_on)                   # per face: which sides emit
         sides = np.bincount(self._light_of_side, minlength=first.size)
         self._q = np.where(sides == 1, local[first], -1)    # a one-face light's face slot
         self.size = np.sqrt(scene.face_areas[self.face])
@@ -332,10 +333,7 @@ class Emitters:
     def _unshadowed(self, origin, normals):
         """(sides, m): :meth:`unshadowed` integrated, per emitting side of a face."""
         side = np.einsum("nqj,qj->nq", origin[:, None, :] - self._centre[None], self._normal)
-        front = np.zeros(self.faces.size, dtype=bool)
-        back = np.zeros(self.faces.size, dtype=bool)
-        front[self._slot[self._side_sign > 0]] = True
-        back[self._slot[self._side_sign < 0]] = True
+        front, back = self._emits
         ff = form_factors(origin, normals, self._polys, self._mid, self._normal,
                           self._face_area, ((side > 0) & front) | ((side < 0) & back))
         q = self._slot

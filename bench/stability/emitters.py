@@ -36,19 +36,25 @@ def floor_errors(result, groups, lamp, size):
         int(np.unique(m.corner_verts[c]).size)
 
 
-def bulb_errors(result, groups, polys, le):
-    """(mean error, worst vertex error, floor vertices) of a bulb room (:func:`scenes.bulb_room`)
-    against rho sum_f Le F(x -> f) over the faces that turn to x."""
-    m = result.output
-    c = corners_of(m, groups["floor"])
-    pts = m.vertices[m.corner_verts[c]]
+def bulb_form_factor(pts, polys):
+    """(n,) sum_f F(x -> f) from floor points ``pts`` (facing up) over a bulb's faces ``polys``
+    (outward) whose front faces x: a convex lamp does not hide itself from outside."""
     up = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
     # Every bulb face has 3 or 4 corners: triangles padded to 4 by repeating a corner.
     stacked = np.stack([np.vstack([q, q[-1:]]) if len(q) == 3 else q for q in polys])
     ff = point_polygon_form_factor(pts, up, stacked)
     normal = np.cross(stacked[:, 1] - stacked[:, 0], stacked[:, 2] - stacked[:, 0])
     facing = np.einsum("pfj,fj->pf", pts[:, None, :] - stacked.mean(1)[None], normal) > 0
-    exact = FLOOR_RHO * le * np.where(facing, ff, 0.0).sum(axis=1)
+    return np.where(facing, ff, 0.0).sum(axis=1)
+
+
+def bulb_errors(result, groups, polys, le):
+    """(mean error, worst vertex error, floor vertices) of a bulb room (:func:`scenes.bulb_room`)
+    against rho Le :func:`bulb_form_factor`."""
+    m = result.output
+    c = corners_of(m, groups["floor"])
+    pts = m.vertices[m.corner_verts[c]]
+    exact = FLOOR_RHO * le * bulb_form_factor(pts, polys)
     got = m.corner_colours[c, 0]
     rel = np.abs(got / exact - 1.0)
     return rel_mean_abs(got, exact), rel.max(), np.unique(m.corner_verts[c]).size
