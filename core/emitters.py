@@ -235,6 +235,9 @@ class Emitters:
         _, first, self._light_of_side = np.unique(key, return_index=True, return_inverse=True)
         self._light_of_side = self._light_of_side.reshape(-1)
         self._first = first
+        order = np.argsort(self._light_of_side, kind="stable")      # sides grouped by light
+        self._by_light = (order, np.searchsorted(self._light_of_side[order],
+                                                 np.arange(first.size)))
         self.face = faces[local[first]]
         self.sign = side_sign[first]
         self.colour = np.concatenate([le[front_on], back[back_on]]).reshape(-1, 3)[first]
@@ -326,8 +329,7 @@ class Emitters:
         lit = self._kept.unshadowed(origin, normals, self._unshadowed)      # per side
         if not self._lamps:
             return list(lit)                                   # per light
-        order = np.argsort(self._light_of_side, kind="stable")
-        starts = np.searchsorted(self._light_of_side[order], np.arange(len(self)))
+        order, starts = self._by_light
         return list(np.add.reduceat(lit[order], starts, axis=0))
 
     def _unshadowed(self, origin, normals):

@@ -27,7 +27,7 @@ over :func:`form_factors` with FAR set past every pair).
 import numpy as np
 
 from .exact import bilinear, pair_form_factor
-from .geometry import patch_extents, unit_frames
+from .geometry import patch_extents, ragged, unit_frames
 from .patches import connected_labels
 from .transfer import padded_polygons
 
@@ -57,11 +57,9 @@ def lamp_labels(scene, faces):
     faces = np.asarray(faces, dtype=np.int64)
     if faces.size < 2:
         return np.zeros(faces.size, dtype=np.int64)
-    owner = np.repeat(np.arange(faces.size), scene.face_sizes[faces])
-    starts = np.repeat(scene.face_starts[faces], scene.face_sizes[faces])
-    local = np.arange(owner.size) - np.repeat(np.cumsum(scene.face_sizes[faces])
-                                             - scene.face_sizes[faces], scene.face_sizes[faces])
-    verts = _welded(scene, np.asarray(scene.corner_verts, dtype=np.int64)[starts + local])
+    owner, local, _ = ragged(scene.face_sizes[faces])
+    verts = _welded(scene, np.asarray(scene.corner_verts, dtype=np.int64)[
+        scene.face_starts[faces][owner] + local])
     order = np.lexsort((owner, verts))
     v, f = verts[order], owner[order]
     mat = np.asarray(scene.face_materials)[faces]
